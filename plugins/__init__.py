@@ -1,0 +1,1 @@
+"""Built-in algorithm plugins, each in its own folder, registered through entry points."""

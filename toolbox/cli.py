@@ -1,0 +1,245 @@
+"""The ``toolbox`` command: list, help, run, pipeline.
+
+Exit codes: 0 success, 1 data error or failed algorithm (or any failed file of a batch),
+2 usage error. Errors are one line on stderr naming the thing and what to do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import textwrap
+
+from . import __version__, kernels, progress
+from .errors import ToolboxError, UsageError
+
+log = logging.getLogger("toolbox")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("general options")
+    g.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress bars, warnings only")
+    g.add_argument("--arch", choices=kernels.ARCHES, default=None,
+                   help="taichi architecture for kernels (default: $TOOLBOX_ARCH or auto: CUDA if present, else CPU)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="toolbox",
+        description="Plugin-based GIS processing toolbox for laser-scanning and photogrammetry data.",
+    )
+    p.add_argument("--version", action="version", version=f"toolbox {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    sp = sub.add_parser("list", help="list every algorithm and the plugin that provides it")
+    sp.add_argument("--json", action="store_true", help="machine-readable output")
+    _common(sp)
+
+    sp = sub.add_parser("help", help="parameters, inputs, outputs and reference of an algorithm")
+    sp.add_argument("algorithm")
+    sp.add_argument("--json", action="store_true", help="machine-readable output")
+    _common(sp)
+
+    sp = sub.add_parser("run", help="run an algorithm",
+                        description="Run ALG on INPUT files. Several files (or a folder) for a single-input "
+                                    "algorithm run as a batch into the output folder.")
+    sp.add_argument("algorithm")
+    sp.add_argument("inputs", nargs="*", metavar="INPUT")
+    sp.add_argument("-o", "--output", required=True, help="primary output file, or a folder")
+    sp.add_argument("--set", dest="params", action="append", default=[], metavar="NAME=VALUE",
+                    help="set a parameter (repeatable)")
+    sp.add_argument("--output-path", dest="named_outputs", action="append", default=[], metavar="NAME=PATH",
+                    help="path of a secondary output (default: beside the primary one); also asks for optional outputs")
+    sp.add_argument("--preview", metavar="PNG", help="write the algorithm's preview image (if it has one) here")
+    sp.add_argument("--crs", help="set or override the CRS of point inputs, e.g. EPSG:28992")
+    sp.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    sp.add_argument("--json", action="store_true", help="print the run report as JSON")
+    sp.add_argument("-j", "--jobs", type=int, default=None, help="parallel files in a batch (default: all cores)")
+    _common(sp)
+
+    sp = sub.add_parser("pipeline", help="run a pipeline file (YAML or JSON)")
+    sp.add_argument("file")
+    sp.add_argument("--crs", help="set or override the CRS of point inputs")
+    sp.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    sp.add_argument("--json", action="store_true", help="print the reports as JSON")
+    _common(sp)
+    return p
+
+
+def _pairs(items, what) -> dict:
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise UsageError(f"{what} {item!r} is not NAME=VALUE")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v
+    return out
+
+
+def _setup(args) -> None:
+    level = logging.WARNING
+    if getattr(args, "verbose", 0) >= 2:
+        level = logging.DEBUG
+    elif getattr(args, "verbose", 0) == 1:
+        level = logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    progress.set_quiet(getattr(args, "quiet", False) or getattr(args, "json", False))
+    kernels.set_arch(getattr(args, "arch", None))
+
+
+def cmd_list(args) -> int:
+    from .registry import registry
+
+    reg = registry()
+    if args.json:
+        print(json.dumps({
+            "algorithms": [{"id": a.id, "title": a.title, "plugin": a.plugin, "distribution": a.distribution,
+                            "version": a.version} for a in sorted(reg.algorithms.values(), key=lambda a: a.id)],
+            "broken": [vars(b) for b in reg.broken],
+            "clashes": reg.clashes,
+        }, indent=2))
+        return 0
+    rows = [(a.id, a.title, f"{a.plugin} ({a.distribution} {a.version})") for a in sorted(reg.algorithms.values(), key=lambda a: a.id)]
+    w = max([len(r[0]) for r in rows] + [9])
+    t = max([len(r[1]) for r in rows] + [5])
+    print(f"{'ALGORITHM':<{w}}  {'TITLE':<{t}}  PLUGIN")
+    for r in rows:
+        print(f"{r[0]:<{w}}  {r[1]:<{t}}  {r[2]}")
+    for aid, owners in sorted(reg.clashes.items()):
+        print(f"{aid:<{w}}  CLASH: claimed by {' and '.join(owners)}")
+    for b in reg.broken:
+        print(f"BROKEN plugin {b.name} ({b.distribution} {b.version}): {b.reason}")
+    return 0
+
+
+def cmd_help(args) -> int:
+    from .registry import registry
+
+    alg = registry().get(args.algorithm)
+    if args.json:
+        print(json.dumps(alg.to_dict(), indent=2, default=str))
+        return 0
+    wrap = lambda s, ind="    ": textwrap.fill(s, 100, initial_indent=ind, subsequent_indent=ind)  # noqa: E731
+    print(f"{alg.id} — {alg.title}")
+    print(f"  provided by {alg.plugin} ({alg.distribution} {alg.version})\n")
+    print(wrap(alg.description, "  "))
+    if alg.reference:
+        print("\nReference:\n" + wrap(alg.reference))
+    print("\nInputs:")
+    if not alg.inputs:
+        print("    (none)")
+    for i in alg.inputs:
+        extra = ", one or more" if i.multiple else ""
+        extra += ", optional" if i.optional else ""
+        print(f"    {i.name} ({i.kind}{extra}): {i.description}")
+    print("\nOutputs:")
+    for o in alg.outputs:
+        opt = ", optional: ask with --output-path" if o.optional else ""
+        print(f"    {o.name} ({o.kind}, {o.extension}{opt}): {o.description}")
+    print("\nParameters (--set NAME=VALUE):")
+    for p in alg.parameters:
+        unit = f" [{p.unit}]" if p.unit else ""
+        print(f"    {p.name} ({p.type.__name__}{unit}) default {p.default if p.default is not None else 'auto'}; allowed {p.allowed()}")
+        print(wrap(p.description, "        "))
+    return 0
+
+
+def _print_report(rep: dict) -> None:
+    for name, info in rep["outputs"].items():
+        if info.get("path") is None:
+            continue
+        detail = ""
+        if info["kind"] == "points":
+            detail = f"{info['n_points']:,} points"
+        elif info["kind"] == "raster":
+            detail = f"{info['width']}x{info['height']} cells of {info['cell_size']:g}"
+        elif info["kind"] == "vector":
+            detail = ", ".join(f"{k}: {v}" for k, v in info["layers"].items())
+        print(f"  {name:<14} {info['path']}  ({detail})" if detail else f"  {name:<14} {info['path']}")
+    if rep.get("stats"):
+        short = {k: v for k, v in rep["stats"].items() if isinstance(v, (int, float, str))}
+        if short:
+            print("  " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in list(short.items())[:8]))
+
+
+def cmd_run(args) -> int:
+    from .registry import registry
+    from .runner import is_batch, run_algorithm, run_batch
+
+    reg = registry()
+    alg = reg.get(args.algorithm)
+    params = _pairs(args.params, "--set")
+    named = _pairs(args.named_outputs, "--output-path")
+    if args.preview:
+        if "preview" not in {o.name for o in alg.outputs}:
+            raise UsageError(f"{alg.id} has no preview image; drop --preview")
+        named["preview"] = args.preview
+    if is_batch(alg, args.inputs):
+        if named:
+            raise UsageError("--output-path/--preview name single files; a batch writes every output into the folder")
+        rep = run_batch(alg.id, args.inputs, args.output, params, overwrite=args.overwrite, crs=args.crs,
+                        jobs=args.jobs, reg=reg)
+        if args.json:
+            print(json.dumps(rep, indent=2, default=str))
+        else:
+            print(f"{alg.id}: {rep['n_done']} of {rep['n_files']} files done, {rep['n_failed']} failed "
+                  f"({rep['timings_s']['total']:.1f} s, {rep['jobs']} jobs) -> {args.output}")
+            for f in rep["failed"]:
+                print(f"  FAILED {f['input']}: {f['error']}")
+        return 1 if rep["n_failed"] else 0
+    rep = run_algorithm(alg.id, args.inputs, args.output, params, outputs=named,
+                        overwrite=args.overwrite, crs=args.crs, reg=reg)
+    if args.json:
+        print(json.dumps(rep, indent=2, default=str))
+    else:
+        print(f"{alg.id} done in {rep['timings_s']['total']:.2f} s, wrote:")
+        _print_report(rep)
+    return 0
+
+
+def cmd_pipeline(args) -> int:
+    from . import pipeline
+
+    stages = pipeline.load(args.file)
+    rep = pipeline.run(stages, overwrite=args.overwrite, crs=args.crs)
+    if args.json:
+        print(json.dumps(rep, indent=2, default=str))
+    else:
+        for r in rep["stages"]:
+            print(f"[{r['stage']}] {r['algorithm']} done in {r['timings_s']['total']:.2f} s")
+            _print_report(r)
+    return 0
+
+
+COMMANDS = {"list": cmd_list, "help": cmd_help, "run": cmd_run, "pipeline": cmd_pipeline}
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not args.command:
+        parser.print_help()
+        return 2
+    try:
+        _setup(args)
+        return COMMANDS[args.command](args)
+    except ToolboxError as exc:
+        print(f"toolbox: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("toolbox: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a plugin's bug: one line, the traceback with -v
+        log.debug("unexpected error", exc_info=True)
+        name = getattr(args, "algorithm", None)
+        where = f"algorithm {name!r} failed" if name else "failed"
+        print(f"toolbox: error: {where}: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
+              "(run with -vv for the traceback)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,387 @@
+"""Point clouds: LAS 1.2–1.4 / LAZ through laspy (lazrs backend), and the ASCII ``X Y Z [label]``
+format of the ISPRS filter test.
+
+Coordinates stay in the file's CRS and units; ``horizontal_unit_m`` and ``vertical_unit_m`` say
+how many metres one unit is, so that algorithms whose parameters are in metres can convert them
+(``pc.to_units(1.0)``) and outputs stay in the input's CRS.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import DataError, UsageError
+from .atomic import atomic_path
+
+log = logging.getLogger(__name__)
+
+LAS_EXTENSIONS = (".las", ".laz")
+ASCII_EXTENSIONS = (".txt", ".xyz", ".csv", ".asc", ".pts")
+_CRS_VLRS = {"GeoKeyDirectoryVlr", "GeoDoubleParamsVlr", "GeoAsciiParamsVlr", "WktCoordinateSystemVlr"}
+# EPSG unit codes of the GeoTIFF VerticalUnitsGeoKey (4099) -> metres per unit
+_GEOTIFF_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
+
+
+@dataclass
+class PointCloud:
+    """A point cloud as plain arrays.
+
+    ``fields`` holds every per-point attribute except x, y, z under its laspy name
+    (classification, return_number, number_of_returns, intensity, gps_time, red, ..., and any
+    extra dimension). ``header`` is the laspy header of the file it came from, kept as the
+    template for writing (point format, scales, offsets, VLRs).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    fields: dict[str, np.ndarray] = field(default_factory=dict)
+    crs: object | None = None  # pyproj.CRS
+    source: str = ""
+    header: object | None = None  # laspy.LasHeader
+    horizontal_unit_m: float = 1.0
+    vertical_unit_m: float = 1.0
+
+    def __post_init__(self):
+        self.x = np.ascontiguousarray(self.x, dtype=np.float64)
+        self.y = np.ascontiguousarray(self.y, dtype=np.float64)
+        self.z = np.ascontiguousarray(self.z, dtype=np.float64)
+        n = len(self.x)
+        if len(self.y) != n or len(self.z) != n:
+            raise ValueError("x, y, z must have the same length")
+        for k, v in self.fields.items():
+            if len(v) != n:
+                raise ValueError(f"field {k!r} has {len(v)} values for {n} points")
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    @property
+    def xyz(self) -> np.ndarray:
+        return np.column_stack([self.x, self.y, self.z])
+
+    @property
+    def classification(self) -> np.ndarray | None:
+        return self.fields.get("classification")
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        return float(self.x.min()), float(self.y.min()), float(self.x.max()), float(self.y.max())
+
+    def subset(self, mask_or_index) -> "PointCloud":
+        idx = mask_or_index
+        return replace(
+            self,
+            x=self.x[idx], y=self.y[idx], z=self.z[idx],
+            fields={k: v[idx] for k, v in self.fields.items()},
+        )
+
+    def with_fields(self, **new_fields: np.ndarray) -> "PointCloud":
+        f = dict(self.fields)
+        f.update(new_fields)
+        return replace(self, fields=f)
+
+    def to_units(self, metres: float, vertical: bool = False) -> float:
+        """Convert a length in metres to this cloud's (horizontal or vertical) units."""
+        return metres / (self.vertical_unit_m if vertical else self.horizontal_unit_m)
+
+    def require_points(self, what: str = "this algorithm", minimum: int = 1) -> None:
+        if len(self) < minimum:
+            raise DataError(
+                f"input {self.source or 'point cloud'!r} has {len(self)} points; {what} needs at least {minimum}"
+            )
+
+
+# --------------------------------------------------------------------------------------------
+# CRS and units
+# --------------------------------------------------------------------------------------------
+
+def parse_crs(text: str):
+    """Parse a user CRS (``EPSG:28992``, WKT, PROJ string) or raise a UsageError."""
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        return CRS.from_user_input(text)
+    except CRSError:
+        raise UsageError(f"--crs {text!r} is not a CRS pyproj knows; give e.g. EPSG:28992") from None
+
+
+def crs_units(crs) -> tuple[float, float | None]:
+    """(metres per horizontal unit, metres per vertical unit or None when the CRS has no Z axis)."""
+    if crs is None:
+        return 1.0, None
+    horiz, vert = crs, None
+    if crs.is_compound and crs.sub_crs_list:
+        horiz = crs.sub_crs_list[0]
+        if len(crs.sub_crs_list) > 1:
+            vert = crs.sub_crs_list[1]
+    if horiz.is_geographic:
+        raise DataError(
+            f"CRS {crs.name!r} is geographic (degrees); reproject the points to a projected CRS "
+            "(e.g. UTM) or pass --crs with the projected CRS they are really in"
+        )
+    h = 1.0
+    if horiz.axis_info:
+        h = float(horiz.axis_info[0].unit_conversion_factor or 1.0)
+    v = None
+    if vert is not None and vert.axis_info:
+        v = float(vert.axis_info[0].unit_conversion_factor or 1.0)
+    return h, v
+
+
+def _geotiff_vertical_unit(header) -> float | None:
+    for vlr in header.vlrs:
+        keys = getattr(vlr, "geo_keys", None)
+        if keys:
+            for k in keys:
+                if k.id == 4099 and k.value_offset in _GEOTIFF_UNITS:
+                    return _GEOTIFF_UNITS[k.value_offset]
+    return None
+
+
+def _apply_crs(pc: PointCloud, crs, header=None) -> PointCloud:
+    h, v = crs_units(crs)
+    if v is None and header is not None:
+        v = _geotiff_vertical_unit(header)
+    if v is None:
+        # Files in feet almost always have heights in the same feet (ASPRS practice).
+        v = h
+    pc.crs, pc.horizontal_unit_m, pc.vertical_unit_m = crs, h, v
+    return pc
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+def point_format_of(path: str | os.PathLike) -> str:
+    """'las' or 'ascii' by extension; UsageError for anything else."""
+    ext = Path(path).suffix.lower()
+    if ext in LAS_EXTENSIONS:
+        return "las"
+    if ext in ASCII_EXTENSIONS:
+        return "ascii"
+    raise UsageError(
+        f"input {str(path)!r} is not a point cloud file (expected .las, .laz or ASCII .txt/.xyz)"
+    )
+
+
+def _check_exists(path: Path) -> None:
+    if not path.exists():
+        raise DataError(f"input {str(path)!r} does not exist; check the path")
+    if path.is_dir():
+        raise UsageError(f"input {str(path)!r} is a folder; give the point cloud files in it")
+
+
+def read_points(path: str | os.PathLike, crs=None) -> PointCloud:
+    """Read a LAS/LAZ or ASCII point cloud. ``crs`` (text or pyproj CRS) sets or overrides the CRS."""
+    path = Path(path)
+    _check_exists(path)
+    user_crs = parse_crs(crs) if isinstance(crs, str) else crs
+    if point_format_of(path) == "ascii":
+        pc = _read_ascii(path)
+        return _apply_crs(pc, user_crs)
+    las = _read_las_data(path)
+    hdr = las.header
+    fields = {}
+    for name in las.point_format.dimension_names:
+        if name in ("X", "Y", "Z"):
+            continue
+        fields[name] = np.asarray(las[name]).copy()
+    file_crs = None
+    if user_crs is None:
+        try:
+            file_crs = hdr.parse_crs()
+        except Exception as exc:  # malformed CRS VLRs: keep the points, say so
+            log.warning("%s: could not parse the CRS VLRs (%s); pass --crs", path, exc)
+    pc = PointCloud(
+        x=np.asarray(las.x), y=np.asarray(las.y), z=np.asarray(las.z),
+        fields=fields, source=str(path), header=hdr,
+    )
+    crs_final = user_crs if user_crs is not None else file_crs
+    if crs_final is None:
+        log.info("%s has no CRS; outputs will have none (pass --crs EPSG:nnnn to set it)", path)
+    return _apply_crs(pc, crs_final, hdr)
+
+
+def _read_las_data(path: Path):
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            expected = reader.header.point_count
+            las = reader.read()
+    except laspy.errors.LaspyException as exc:
+        msg = str(exc)
+        if "signature" in msg.lower():
+            raise DataError(f"input {str(path)!r} is not a LAS/LAZ file (bad file signature); check the file") from None
+        raise DataError(f"input {str(path)!r} could not be read as LAS/LAZ ({_short(msg)}); the file may be truncated or corrupt") from None
+    except (ValueError, EOFError, OSError, RuntimeError) as exc:
+        raise DataError(f"input {str(path)!r} could not be read as LAS/LAZ ({_short(str(exc))}); the file may be truncated or corrupt") from None
+    if len(las.points) != expected:
+        raise DataError(
+            f"input {str(path)!r} is truncated: the header promises {expected} points, the file holds "
+            f"{len(las.points)}; re-download or re-export it"
+        )
+    return las
+
+
+def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None) -> Iterator[PointCloud]:
+    """Read a LAS/LAZ file in chunks of at most ``chunk_points`` (bounded memory)."""
+    import laspy
+
+    path = Path(path)
+    _check_exists(path)
+    if point_format_of(path) == "ascii":
+        yield read_points(path, crs=crs)
+        return
+    user_crs = parse_crs(crs) if isinstance(crs, str) else crs
+    try:
+        reader = laspy.open(path)
+    except laspy.errors.LaspyException as exc:
+        raise DataError(f"input {str(path)!r} is not a readable LAS/LAZ file ({_short(str(exc))})") from None
+    with reader:
+        hdr = reader.header
+        crs_final = user_crs if user_crs is not None else _safe_parse_crs(hdr)
+        seen = 0
+        try:
+            for chunk in reader.chunk_iterator(chunk_points):
+                seen += len(chunk)
+                fields = {n: np.asarray(chunk[n]).copy() for n in chunk.point_format.dimension_names if n not in ("X", "Y", "Z")}
+                pc = PointCloud(
+                    x=np.asarray(chunk.x), y=np.asarray(chunk.y), z=np.asarray(chunk.z),
+                    fields=fields, source=str(path), header=hdr,
+                )
+                yield _apply_crs(pc, crs_final, hdr)
+        except (laspy.errors.LaspyException, ValueError, EOFError, OSError, RuntimeError) as exc:
+            raise DataError(f"input {str(path)!r} is truncated or corrupt after {seen} points ({_short(str(exc))})") from None
+        if seen != hdr.point_count:
+            raise DataError(f"input {str(path)!r} is truncated: the header promises {hdr.point_count} points, the file holds {seen}")
+
+
+def _safe_parse_crs(hdr):
+    try:
+        return hdr.parse_crs()
+    except Exception:
+        return None
+
+
+def _read_ascii(path: Path) -> PointCloud:
+    """ASCII ``X Y Z [label] [more columns]``, whitespace or comma separated, '#' comments."""
+    try:
+        with open(path, "r", encoding="utf-8", errors="replace") as fh:
+            first = ""
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    first = line
+                    break
+        delim = "," if "," in first else None
+        data = np.loadtxt(path, delimiter=delim, comments="#", ndmin=2, dtype=np.float64)
+    except ValueError as exc:
+        raise DataError(f"input {str(path)!r} is not an ASCII 'X Y Z [label]' file ({_short(str(exc))})") from None
+    if data.size == 0:
+        return PointCloud(x=np.empty(0), y=np.empty(0), z=np.empty(0), source=str(path))
+    if data.shape[1] < 3:
+        raise DataError(f"input {str(path)!r} has {data.shape[1]} columns; an ASCII point file needs X Y Z [label]")
+    fields: dict[str, np.ndarray] = {}
+    if data.shape[1] == 4:
+        fields["label"] = data[:, 3].astype(np.int32)  # ISPRS filter test: 0 bare earth, 1 object
+    else:
+        for j in range(3, data.shape[1]):
+            fields[f"column_{j + 1}"] = data[:, j]
+    return PointCloud(x=data[:, 0], y=data[:, 1], z=data[:, 2], fields=fields, source=str(path))
+
+
+def _short(msg: str) -> str:
+    return " ".join(msg.split())[:160]
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = False) -> Path:
+    """Write LAS/LAZ (by extension), atomically.
+
+    Every dimension of the source file is kept; new fields become classification, return
+    numbers etc. when they are standard dimensions of the point format, and extra bytes
+    dimensions otherwise. Clouds that did not come from LAS are written as LAS 1.4 point
+    format 6 with a WKT CRS.
+    """
+    import laspy
+
+    path = Path(path)
+    if path.suffix.lower() not in LAS_EXTENSIONS:
+        raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
+    header = _header_for(pc)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pc.x, pc.y, pc.z
+    std = set(las.point_format.dimension_names)
+    for name, values in pc.fields.items():
+        if name in std:
+            las[name] = values
+        else:
+            las.add_extra_dim(laspy.ExtraBytesParams(name=name, type=_extra_type(values)))
+            las[name] = values
+    if len(pc):
+        header.mins = [pc.x.min(), pc.y.min(), pc.z.min()]
+        header.maxs = [pc.x.max(), pc.y.max(), pc.z.max()]
+    with atomic_path(path, overwrite) as tmp:
+        las.write(tmp, laz_backend=laspy.LazBackend.Lazrs if path.suffix.lower() == ".laz" else None)
+    return path
+
+
+def _extra_type(values: np.ndarray):
+    dt = np.asarray(values).dtype
+    if dt == np.bool_:
+        return np.uint8
+    return dt
+
+
+def _header_for(pc: PointCloud):
+    import laspy
+
+    src = pc.header
+    cls = pc.fields.get("classification")
+    needs_wide_class = cls is not None and len(cls) and int(np.max(cls)) > 31
+    if src is not None:
+        fmt_id = src.point_format.id
+        version = str(src.version)
+        if needs_wide_class and fmt_id < 6:
+            # classes above 31 need the LAS 1.4 formats; keep RGB / NIR if the source had them
+            fmt_id = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}[fmt_id]
+            version = "1.4"
+        header = laspy.LasHeader(version=version, point_format=fmt_id)
+        header.scales = src.scales
+        header.offsets = src.offsets
+        # keep the source's VLRs; CRS VLRs are rewritten from pc.crs (which --crs may override)
+        drop = {"ExtraBytesVlr"} | (_CRS_VLRS if pc.crs is not None else set())
+        for vlr in src.vlrs:
+            if type(vlr).__name__ not in drop:
+                header.vlrs.append(vlr)
+        if pc.crs is not None:
+            _add_crs(header, pc.crs)
+        header.system_identifier = src.system_identifier
+        header.generating_software = "lidar-toolbox"
+        return header
+    header = laspy.LasHeader(version="1.4", point_format=6)
+    if len(pc):
+        header.offsets = [np.floor(pc.x.min()), np.floor(pc.y.min()), np.floor(pc.z.min())]
+    header.scales = [0.001, 0.001, 0.001]
+    header.generating_software = "lidar-toolbox"
+    if pc.crs is not None:
+        _add_crs(header, pc.crs)
+    return header
+
+
+def _add_crs(header, crs) -> None:
+    try:
+        header.add_crs(crs)
+    except Exception as exc:
+        log.warning("could not store CRS %s in the LAS header: %s", getattr(crs, "name", crs), exc)

@@ -1,0 +1,57 @@
+"""Vectors: GeoPackage through geopandas/pyogrio, several layers per file, each with its QGIS
+style embedded so that QGIS opens it styled."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import DataError, UsageError
+from .atomic import atomic_path
+from .styles import embed_layer_styles, find_style, render_style
+
+VECTOR_EXTENSIONS = (".gpkg",)
+
+
+def write_vectors(layers: dict, path: str | os.PathLike, style_dirs=(), overwrite: bool = False) -> Path:
+    """Write ``{layer name: GeoDataFrame}`` into one GeoPackage, atomically, styles embedded.
+
+    Empty layers are written too (with their geometry type) so that the file's layout does not
+    depend on what was found.
+    """
+    import geopandas as gpd
+
+    path = Path(path)
+    if path.suffix.lower() not in VECTOR_EXTENSIONS:
+        raise UsageError(f"output {str(path)!r}: vectors are written as GeoPackage (.gpkg)")
+    if not layers:
+        raise DataError(f"output {str(path)!r}: no layer to write")
+    styles = {}
+    with atomic_path(path, overwrite) as tmp:
+        for name, gdf in layers.items():
+            if not isinstance(gdf, gpd.GeoDataFrame):
+                raise TypeError(f"layer {name!r} is a {type(gdf).__name__}, not a GeoDataFrame")
+            kwargs = {}
+            if len(gdf) == 0:
+                gtype = gdf.attrs.get("geometry_type", "Unknown")
+                kwargs["geometry_type"] = gtype
+            gdf.to_file(tmp, layer=name, driver="GPKG", engine="pyogrio", **kwargs)
+            style = find_style(name, style_dirs)
+            if style is not None:
+                styles[name] = render_style(style.read_text(encoding="utf-8"))
+        embed_layer_styles(tmp, styles)
+    return path
+
+
+def read_vectors(path: str | os.PathLike) -> dict:
+    import geopandas as gpd
+    import pyogrio
+
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"input {str(path)!r} does not exist; check the path")
+    try:
+        names = [row[0] for row in pyogrio.list_layers(path)]
+    except Exception as exc:
+        raise DataError(f"input {str(path)!r} is not a readable vector file ({' '.join(str(exc).split())[:160]})") from None
+    return {n: gpd.read_file(path, layer=n, engine="pyogrio") for n in names if n != "layer_styles"}

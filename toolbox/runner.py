@@ -1,0 +1,465 @@
+"""Running an algorithm: plan outputs, read inputs, validate, call the plugin, write atomically,
+report. Also batch runs (one file at a time, in parallel processes)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from . import kernels, progress
+from .algorithm import OUTPUT_EXTENSIONS, Algorithm, Result
+from .errors import DataError, ToolboxError, UsageError
+from .registry import Registry, registry
+
+log = logging.getLogger(__name__)
+
+# What each input kind accepts, by file extension
+INPUT_EXTENSIONS = {
+    "points": (".las", ".laz", ".txt", ".xyz", ".csv", ".asc", ".pts"),
+    "raster": (".tif", ".tiff"),
+    "vector": (".gpkg", ".shp", ".geojson", ".json", ".fgb"),
+    "photos": (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".json"),
+}
+KIND_WORDS = {"points": "a point cloud", "raster": "a raster", "vector": "a vector file", "photos": "a photo set"}
+
+
+@dataclass
+class Context:
+    """What a running algorithm may use from the host."""
+
+    registry: Registry
+    algorithm_id: str = ""
+    quiet: bool = False
+    stats: dict[str, Any] = field(default_factory=dict)
+    requested: frozenset = frozenset()
+
+    def wants(self, output_name: str) -> bool:
+        """Whether an optional output was asked for (required outputs are always wanted)."""
+        alg = self.registry.algorithms.get(self.algorithm_id)
+        if alg is not None:
+            for o in alg.outputs:
+                if o.name == output_name and not o.optional:
+                    return True
+        return output_name in self.requested
+
+    @property
+    def log(self) -> logging.Logger:
+        return logging.getLogger(f"toolbox.alg.{self.algorithm_id}")
+
+    def progress(self, iterable=None, total=None, desc: str = "", unit: str = "it"):
+        return progress.bar(iterable, total=total, desc=desc or self.algorithm_id, unit=unit)
+
+    def taichi(self):
+        """The taichi module, initialised once (CUDA when present, else CPU, or as --arch says)."""
+        return kernels.taichi()
+
+    def call(self, algorithm_id: str, inputs: Mapping[str, Any], **params) -> Result:
+        """Run another algorithm in memory on data (not files); returns its Result."""
+        alg = self.registry.get(algorithm_id)
+        values = alg.validate_params(params)
+        sub = Context(self.registry, algorithm_id, self.quiet)
+        return _as_result(alg.run(dict(inputs), values, sub), alg)
+
+
+# --------------------------------------------------------------------------------------------
+# Planning
+# --------------------------------------------------------------------------------------------
+
+def input_kind_of(path: str | os.PathLike) -> str | None:
+    p = Path(path)
+    if p.is_dir():
+        return "photos"
+    ext = p.suffix.lower()
+    for kind in ("points", "raster", "vector"):
+        if ext in INPUT_EXTENSIONS[kind]:
+            return kind
+    if ext in INPUT_EXTENSIONS["photos"]:
+        return "photos"
+    return None
+
+
+def assign_inputs(alg: Algorithm, files: Sequence[str]) -> dict[str, Any]:
+    """Map positional files onto the algorithm's declared inputs, checking their kinds."""
+    specs = list(alg.inputs)
+    files = [str(f) for f in files]
+    if not specs:
+        if files:
+            raise UsageError(f"{alg.id} takes no input file, but {len(files)} were given")
+        return {}
+    assigned: dict[str, Any] = {}
+    rest = list(files)
+    for i, spec in enumerate(specs):
+        last = i == len(specs) - 1
+        if spec.multiple:
+            n_after = sum(1 for s in specs[i + 1:] if not s.optional)
+            take = rest[: max(len(rest) - n_after, 0)] if not last else rest
+            rest = rest[len(take):]
+            if not take and not spec.optional:
+                raise UsageError(f"{alg.id} needs {KIND_WORDS[spec.kind]} for its input {spec.name!r}")
+            if take:
+                assigned[spec.name] = take
+        else:
+            if not rest:
+                if spec.optional:
+                    continue
+                raise UsageError(f"{alg.id} needs {KIND_WORDS[spec.kind]} for its input {spec.name!r}; see 'toolbox help {alg.id}'")
+            assigned[spec.name] = rest.pop(0)
+    if rest:
+        raise UsageError(f"{alg.id} takes {len(specs)} input(s) but {len(files)} files were given: {', '.join(rest)} left over")
+    for spec in specs:
+        if spec.name not in assigned:
+            continue
+        vals = assigned[spec.name] if isinstance(assigned[spec.name], list) else [assigned[spec.name]]
+        for f in vals:
+            if spec.kind == "photos":
+                continue
+            kind = input_kind_of(f)
+            if kind != spec.kind:
+                what = KIND_WORDS.get(kind, "not a supported file type") if kind else "not a supported file type"
+                exts = ", ".join(INPUT_EXTENSIONS[spec.kind])
+                raise UsageError(
+                    f"input {f!r} is {what}, but {alg.id} expects {KIND_WORDS[spec.kind]} for {spec.name!r} ({exts})"
+                )
+    return assigned
+
+
+def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, str] | None = None,
+                 stem: str | None = None) -> dict[str, Path]:
+    """Paths of every output: the primary at ``output`` (or ``output/<stem><ext>`` for a folder),
+    the others at ``<stem>_<name><ext>`` beside it, unless ``named`` gives a path for them."""
+    named = dict(named or {})
+    known = {o.name for o in alg.outputs}
+    for n in named:
+        if n not in known:
+            raise UsageError(f"{alg.id} has no output {n!r}; its outputs: {', '.join(sorted(known))}")
+    out = Path(output)
+    primary = alg.outputs[0]
+    is_dir = out.is_dir() or str(output).endswith(os.sep) or not out.suffix
+    if is_dir:
+        if not out.exists():
+            raise DataError(f"output folder {str(out)!r} does not exist; create it first")
+        base = out / (stem or primary.name)
+        primary_path = base.with_name(base.name + primary.extension)
+    else:
+        if out.suffix.lower() not in OUTPUT_EXTENSIONS[primary.kind]:
+            exts = ", ".join(OUTPUT_EXTENSIONS[primary.kind])
+            raise UsageError(f"output {str(out)!r}: {alg.id} writes {primary.kind} here, so use {exts}")
+        base = out.with_suffix("")
+        primary_path = out
+    paths = {primary.name: Path(named.get(primary.name, primary_path))}
+    for o in alg.outputs[1:]:
+        p = Path(named[o.name]) if o.name in named else base.with_name(f"{base.name}{o.suffix or '_' + o.name}{o.extension}")
+        if p.suffix.lower() not in OUTPUT_EXTENSIONS[o.kind]:
+            raise UsageError(f"output {str(p)!r}: {alg.id}'s output {o.name!r} is {o.kind}; use {', '.join(OUTPUT_EXTENSIONS[o.kind])}")
+        paths[o.name] = p
+    return paths
+
+
+# --------------------------------------------------------------------------------------------
+# Reading and writing
+# --------------------------------------------------------------------------------------------
+
+def read_input(kind: str, path: str, crs=None):
+    if kind == "points":
+        from .io.points import read_points
+
+        return read_points(path, crs=crs)
+    if kind == "raster":
+        from .io.rasters import read_raster
+
+        return read_raster(path)
+    if kind == "vector":
+        from .io.vectors import read_vectors
+
+        return read_vectors(path)
+    if kind == "photos":
+        p = Path(path)
+        if not p.exists():
+            raise DataError(f"input {path!r} does not exist; check the path")
+        return p
+    raise UsageError(f"unknown input kind {kind!r}")
+
+
+def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) -> dict:
+    """Write one output atomically; return a summary (counts) for the report."""
+    from .io.atomic import atomic_path
+
+    if kind == "points":
+        from .io.points import PointCloud, write_points
+
+        if not isinstance(data, PointCloud):
+            raise TypeError(f"points output must be a PointCloud, got {type(data).__name__}")
+        write_points(data, path, overwrite=overwrite)
+        summary = {"n_points": len(data)}
+        cls = data.classification
+        if cls is not None and len(cls):
+            u, c = np.unique(cls, return_counts=True)
+            summary["classes"] = {int(k): int(v) for k, v in zip(u, c)}
+        return summary
+    if kind == "raster":
+        from .io.rasters import Raster, write_raster
+
+        if not isinstance(data, Raster):
+            raise TypeError(f"raster output must be a Raster, got {type(data).__name__}")
+        write_raster(data, path, style_dirs=style_dirs, overwrite=overwrite)
+        rows, cols = data.shape
+        return {"width": int(cols), "height": int(rows), "cell_size": data.cell_size,
+                "style": str(path.with_suffix(".qml")) if path.with_suffix(".qml").exists() else None}
+    if kind == "vector":
+        from .io.vectors import write_vectors
+
+        write_vectors(data, path, style_dirs=style_dirs, overwrite=overwrite)
+        return {"layers": {name: int(len(gdf)) for name, gdf in data.items()}}
+    if kind == "json":
+        with atomic_path(path, overwrite) as tmp:
+            tmp.write_text(json.dumps(data, indent=2, default=_json_default), encoding="utf-8")
+        return {"keys": sorted(data)[:20] if isinstance(data, dict) else None}
+    if kind == "image":
+        write_png(np.asarray(data), path, overwrite)
+        return {"width": int(np.asarray(data).shape[-2]), "height": int(np.asarray(data).shape[-3] if np.asarray(data).ndim == 3 else np.asarray(data).shape[0])}
+    raise UsageError(f"unknown output kind {kind!r}")
+
+
+def write_png(rgb: np.ndarray, path: Path, overwrite: bool) -> None:
+    """Write an (rows, cols[, 3|4]) uint8 image as PNG (through rasterio's PNG driver)."""
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    from .io.atomic import atomic_path
+
+    img = np.asarray(rgb)
+    if img.dtype != np.uint8:
+        raise TypeError("image outputs must be uint8")
+    bands = img[np.newaxis] if img.ndim == 2 else np.moveaxis(img, -1, 0)
+    with atomic_path(path, overwrite) as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(tmp, "w", driver="PNG", width=bands.shape[2], height=bands.shape[1],
+                           count=bands.shape[0], dtype="uint8") as ds:
+            ds.write(bands)
+    for aux in path.parent.glob(path.name + ".aux.xml"):
+        aux.unlink()
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return str(o)
+
+
+def _as_result(value, alg: Algorithm) -> Result:
+    if isinstance(value, Result):
+        res = value
+    elif isinstance(value, Mapping):
+        res = Result(outputs=dict(value))
+    else:
+        raise TypeError(f"{alg.id}: run returned {type(value).__name__}, not a Result or dict of outputs")
+    known = {o.name for o in alg.outputs}
+    for name in res.outputs:
+        if name not in known:
+            raise TypeError(f"{alg.id}: run returned an undeclared output {name!r}")
+    for o in alg.outputs:
+        if o.name not in res.outputs and not o.optional:
+            raise TypeError(f"{alg.id}: run did not return its output {o.name!r}")
+    return res
+
+
+# --------------------------------------------------------------------------------------------
+# One run
+# --------------------------------------------------------------------------------------------
+
+def run_algorithm(
+    algorithm_id: str,
+    inputs: Sequence[str] | Mapping[str, Any] = (),
+    output: str | os.PathLike | None = None,
+    params: Mapping[str, Any] | None = None,
+    *,
+    outputs: Mapping[str, str] | None = None,
+    overwrite: bool = False,
+    crs: str | None = None,
+    reg: Registry | None = None,
+) -> dict:
+    """Run one algorithm on files and write its outputs; return the run report (a dict).
+
+    ``inputs`` is a list of paths (assigned to the declared inputs in order) or a mapping
+    ``{input name: path or list of paths}``. Everything is validated before any work starts.
+    """
+    t0 = time.perf_counter()
+    reg = reg or registry()
+    alg = reg.get(algorithm_id)
+    values = alg.validate_params(params or {})
+    if crs is not None:
+        from .io.points import parse_crs
+
+        crs = parse_crs(crs)
+    assigned = dict(inputs) if isinstance(inputs, Mapping) else assign_inputs(alg, inputs)
+    if output is None:
+        raise UsageError(f"{alg.id} writes files; give an output with -o")
+    stem = None
+    first = next(iter(assigned.values()), None)
+    if first is not None:
+        stem = Path(first[0] if isinstance(first, list) else first).stem
+    paths = plan_outputs(alg, output, outputs, stem)
+    optional = {o.name for o in alg.outputs if o.optional}
+    requested = frozenset(n for n in (outputs or {}) if n in optional)
+    paths = {n: p for n, p in paths.items() if n not in optional or n in requested}
+    from .io.atomic import check_writable
+
+    for p in paths.values():
+        check_writable(p, overwrite)
+
+    specs = {s.name: s for s in alg.inputs}
+    data = {}
+    for name, val in assigned.items():
+        kind = specs[name].kind
+        if isinstance(val, list):
+            data[name] = [read_input(kind, v, crs) for v in val]
+        else:
+            data[name] = read_input(kind, val, crs)
+    t_read = time.perf_counter()
+
+    ctx = Context(reg, alg.id, requested=requested)
+    try:
+        result = _as_result(alg.run(data, values, ctx), alg)
+    except ToolboxError:
+        raise
+    except MemoryError:
+        raise DataError(f"{alg.id} ran out of memory on {stem or 'its input'}; use a coarser resolution or tile the input") from None
+    t_compute = time.perf_counter()
+
+    kinds = {o.name: o.kind for o in alg.outputs}
+    written = {}
+    try:
+        for name, value in result.outputs.items():
+            if value is None or name not in paths:
+                continue
+            summary = write_output(kinds[name], value, paths[name], reg.style_dirs, overwrite)
+            written[name] = {"path": str(paths[name]), "kind": kinds[name], **summary}
+    except BaseException:
+        # a failed write leaves no file of this run behind, also none of the outputs already written
+        for info in written.values():
+            Path(info["path"]).unlink(missing_ok=True)
+        raise
+    t_write = time.perf_counter()
+    stats = dict(ctx.stats)
+    stats.update(result.stats)
+    return {
+        "algorithm": alg.id,
+        "plugin": alg.plugin,
+        "distribution": alg.distribution,
+        "version": alg.version,
+        "inputs": {k: v for k, v in assigned.items()},
+        "parameters": values,
+        "outputs": written,
+        "stats": stats,
+        "taichi_arch": kernels.arch_used(),
+        "timings_s": {
+            "read": round(t_read - t0, 4),
+            "compute": round(t_compute - t_read, 4),
+            "write": round(t_write - t_compute, 4),
+            "total": round(t_write - t0, 4),
+        },
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Batch
+# --------------------------------------------------------------------------------------------
+
+def expand_inputs(files: Sequence[str], kind: str) -> list[str]:
+    """Folders stand for the files of ``kind`` in them (sorted)."""
+    out = []
+    for f in files:
+        p = Path(f)
+        if p.is_dir() and kind != "photos":
+            found = sorted(str(q) for q in p.iterdir() if q.suffix.lower() in INPUT_EXTENSIONS[kind] and q.is_file())
+            if not found:
+                raise UsageError(f"folder {f!r} holds no {KIND_WORDS[kind]} files ({', '.join(INPUT_EXTENSIONS[kind])})")
+            out.extend(found)
+        else:
+            out.append(str(f))
+    return out
+
+
+def is_batch(alg: Algorithm, files: Sequence[str]) -> bool:
+    if len(alg.inputs) != 1 or alg.inputs[0].multiple:
+        return False
+    return len(files) > 1 or any(Path(f).is_dir() and alg.inputs[0].kind != "photos" for f in files)
+
+
+def _batch_one(args) -> tuple[str, dict | None, str | None]:
+    algorithm_id, path, outdir, params, overwrite, crs, quiet, arch = args
+    progress.set_quiet(True)
+    kernels.set_arch(arch)
+    try:
+        rep = run_algorithm(algorithm_id, [path], outdir, params, overwrite=overwrite, crs=crs)
+        return path, rep, None
+    except ToolboxError as exc:
+        return path, None, str(exc)
+    except Exception as exc:  # a bug on one file must not stop the others
+        return path, None, f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
+
+
+def run_batch(algorithm_id: str, files: Sequence[str], outdir: str, params: Mapping[str, Any] | None = None,
+              *, overwrite: bool = False, crs: str | None = None, jobs: int | None = None,
+              reg: Registry | None = None) -> dict:
+    """Run a single-input algorithm on many files in parallel processes; failures are collected,
+    never fatal to the others. Returns {"runs": [...], "failed": [{"input", "error"}], ...}."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    reg = reg or registry()
+    alg = reg.get(algorithm_id)
+    alg.validate_params(params or {})
+    files = expand_inputs(files, alg.inputs[0].kind)
+    out = Path(outdir)
+    if not out.is_dir():
+        raise UsageError(f"a batch of {len(files)} files writes into a folder; {outdir!r} is not an existing folder")
+    jobs = max(1, min(jobs or os.cpu_count() or 1, len(files)))
+    arch = kernels.requested_arch()
+    tasks = [(algorithm_id, f, str(out), dict(params or {}), overwrite, crs, True, arch) for f in files]
+    runs, failed = [], []
+    t0 = time.perf_counter()
+    bar = progress.bar(total=len(files), desc=f"{algorithm_id} batch", unit="file", leave=True)
+    running = set()
+    # fork keeps start-up cheap; taichi is never initialised in the parent, so children are clean
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        futures = {}
+        for t in tasks:
+            futures[pool.submit(_batch_one, t)] = t[1]
+            running.add(t[1])
+        for fut in cf.as_completed(futures):
+            path = futures[fut]
+            running.discard(path)
+            try:
+                path, rep, err = fut.result()
+            except Exception as exc:  # the worker died (out of memory, killed)
+                rep, err = None, f"worker died: {type(exc).__name__}: {exc}"
+            if err is None:
+                runs.append(rep)
+            else:
+                failed.append({"input": path, "error": err})
+                log.error("%s: %s", path, err)
+            bar.set_postfix_str(f"in progress {len(running)}, done {len(runs)}, failed {len(failed)}")
+            bar.update(1)
+    bar.close()
+    return {
+        "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version,
+        "parameters": alg.validate_params(params or {}),
+        "n_files": len(files), "n_done": len(runs), "n_failed": len(failed),
+        "runs": sorted(runs, key=lambda r: str(r["inputs"])), "failed": failed,
+        "timings_s": {"total": round(time.perf_counter() - t0, 3)}, "jobs": jobs,
+    }

@@ -1,0 +1,284 @@
+"""Scene objects with exact geometry: buildings with planar roof faces, trees, lattice pylons,
+catenary conductors. Pure numpy/shapely; local metres."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer")
+
+
+# ------------------------------------------------------------------------------------------
+# Buildings
+# ------------------------------------------------------------------------------------------
+
+@dataclass
+class RoofFace:
+    """A planar roof face z = z0 + ga * a + gb * b in the building frame (a along, b across)."""
+
+    name: str
+    z0: float
+    ga: float
+    gb: float
+    polygon_ab: object = None  # shapely Polygon in the building frame
+
+
+@dataclass
+class Building:
+    id: int
+    cu: float  # centre, local metres
+    cv: float
+    length_m: float  # along a (the ridge direction)
+    width_m: float
+    heading_rad: float  # direction of a, counter-clockwise from east
+    eave_m: float  # eave height above the highest ground under the footprint
+    roof: str
+    pitch_deg: float = 0.0
+    base_z: float = 0.0  # absolute height of the eave reference (set by the scene)
+    faces: list = field(default_factory=list)
+    dormer: tuple | None = None  # (a0, width, b_front, ridge_z_rel, pitch_deg)
+
+    def to_ab(self, u, v):
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        du, dv = u - self.cu, v - self.cv
+        return du * c + dv * s, -du * s + dv * c
+
+    def to_uv(self, a, b):
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        return self.cu + a * c - b * s, self.cv + a * s + b * c
+
+    def contains(self, u, v, margin=0.0):
+        a, b = self.to_ab(u, v)
+        return (np.abs(a) <= self.length_m / 2 + margin) & (np.abs(b) <= self.width_m / 2 + margin)
+
+    def footprint_uv(self):
+        L, W = self.length_m / 2, self.width_m / 2
+        a = np.array([-L, L, L, -L])
+        b = np.array([-W, -W, W, W])
+        return np.column_stack(self.to_uv(a, b))
+
+    def build_faces(self) -> None:
+        """Create the faces and their exact plan polygons (building frame)."""
+        from shapely.geometry import box
+
+        L, W = self.length_m / 2, self.width_m / 2
+        t = np.tan(np.radians(self.pitch_deg))
+        z = self.base_z + self.eave_m
+        fp = box(-L, -W, L, W)
+        if self.roof == "flat":
+            self.faces = [RoofFace("flat", z, 0.0, 0.0, fp)]
+            return
+        if self.roof == "gable":
+            faces = [RoofFace("south", z + t * W, 0.0, t, None), RoofFace("north", z + t * W, 0.0, -t, None)]
+        else:  # hip and hip_dormer: equal pitch on all four faces
+            faces = [
+                RoofFace("south", z + t * W, 0.0, t, None),  # b<0 side, rises towards b=0
+                RoofFace("north", z + t * W, 0.0, -t, None),
+                RoofFace("west", z + t * L, t, 0.0, None),
+                RoofFace("east", z + t * L, -t, 0.0, None),
+            ]
+        # min-type roof: a face is where its plane is the lowest of all
+        for f in faces:
+            poly = fp
+            for g in faces:
+                if g is f:
+                    continue
+                # keep (f - g)(a, b) <= 0
+                poly = _clip(poly, f.ga - g.ga, f.gb - g.gb, g.z0 - f.z0)
+            f.polygon_ab = poly
+        if self.roof == "hip_dormer":
+            a0, dw, b_front, ridge_rel, dpitch = self.dormer
+            td = np.tan(np.radians(dpitch))
+            zr = self.base_z + ridge_rel
+            # dormer faces: z = zr - td * |a - a0|, over a0-dw/2 <= a <= a0+dw/2, 0 <= b <= b_front
+            left = RoofFace("dormer_west", zr - td * a0, td, 0.0, None)
+            right = RoofFace("dormer_east", zr + td * a0, -td, 0.0, None)
+            north = faces[1]
+            for f, (lo, hi) in ((left, (a0 - dw / 2, a0)), (right, (a0, a0 + dw / 2))):
+                poly = box(lo, 0.0, hi, b_front)
+                poly = _clip(poly, north.ga - f.ga, north.gb - f.gb, f.z0 - north.z0)  # dormer above the face
+                f.polygon_ab = poly
+            north.polygon_ab = north.polygon_ab.difference(left.polygon_ab).difference(right.polygon_ab)
+            faces += [left, right]
+        self.faces = [f for f in faces if f.polygon_ab is not None and f.polygon_ab.area > 1e-6]
+
+    def roof_height(self, u, v):
+        """Roof height and face index for points inside the footprint."""
+        a, b = self.to_ab(u, v)
+        zs = np.stack([f.z0 + f.ga * a + f.gb * b for f in self.faces[: self._n_main()]])
+        idx = np.argmin(zs, axis=0)
+        z = np.take_along_axis(zs, idx[None], 0)[0]
+        if self.roof == "hip_dormer":
+            a0, dw, b_front, ridge_rel, dpitch = self.dormer
+            left, right = self.faces[-2], self.faces[-1]
+            zd = np.where(a < a0, left.z0 + left.ga * a, right.z0 + right.ga * a)
+            inbox = (np.abs(a - a0) <= dw / 2) & (b >= 0) & (b <= b_front) & (zd > z)
+            z = np.where(inbox, zd, z)
+            idx = np.where(inbox, np.where(a < a0, len(self.faces) - 2, len(self.faces) - 1), idx)
+        return z, idx
+
+    def _n_main(self) -> int:
+        return len(self.faces) - (2 if self.roof == "hip_dormer" else 0)
+
+    def face_plane_world(self, f: RoofFace, origin=(0.0, 0.0)):
+        """Unit normal (upwards) and offset d with n . p = d, in local scene coordinates + origin."""
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        # z = z0 + ga*a + gb*b, a = c*du + s*dv, b = -s*du + c*dv
+        gu = f.ga * c - f.gb * s
+        gv = f.ga * s + f.gb * c
+        z0 = f.z0 - gu * self.cu - gv * self.cv
+        # shift to world coordinates: u = x - ox
+        z0w = z0 - gu * origin[0] - gv * origin[1]
+        n = np.array([-gu, -gv, 1.0])
+        norm = np.linalg.norm(n)
+        n = n / norm
+        return n, float(z0w / norm)
+
+    def face_polygon_uv(self, f: RoofFace):
+        from shapely import affinity
+
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        return affinity.affine_transform(f.polygon_ab, [c, -s, s, c, self.cu, self.cv])
+
+
+def _clip(poly, A, B, C):
+    """Keep the part of ``poly`` where A*a + B*b <= C."""
+    from shapely.geometry import Polygon
+
+    if abs(A) < 1e-12 and abs(B) < 1e-12:
+        return poly if C >= 0 else Polygon()
+    big = 1e4
+    n = np.array([A, B]) / np.hypot(A, B)
+    c = C / np.hypot(A, B)
+    p0 = n * c  # a point on the line
+    t = np.array([-n[1], n[0]])
+    pts = [p0 + t * big, p0 + t * big - n * big, p0 - t * big - n * big, p0 - t * big]
+    return poly.intersection(Polygon(pts))
+
+
+# ------------------------------------------------------------------------------------------
+# Vegetation
+# ------------------------------------------------------------------------------------------
+
+@dataclass
+class Trees:
+    """Crowns as arrays: centre, ground height, top height, crown base, radius, shape, class."""
+
+    u: np.ndarray
+    v: np.ndarray
+    ground: np.ndarray
+    top: np.ndarray
+    base: np.ndarray
+    radius: np.ndarray
+    conifer: np.ndarray  # bool: cone, else spheroid
+    asprs: np.ndarray  # 3, 4 or 5 by the plant's top height above ground
+    first_id: int = 0
+
+    def __len__(self):
+        return len(self.u)
+
+    def surfaces(self, k, r):
+        """Top and bottom crown surface of tree k at horizontal distance r (arrays)."""
+        top, base, R = self.top[k], self.base[k], self.radius[k]
+        rr = np.clip(r / R, 0, 1)
+        cone_top = top - (top - base) * rr
+        zc = (top + base) / 2
+        c = (top - base) / 2
+        sph = np.sqrt(np.clip(1 - rr ** 2, 0, 1))
+        sph_top = zc + c * sph
+        sph_bot = zc - c * sph
+        z_top = np.where(self.conifer[k], cone_top, sph_top)
+        z_bot = np.where(self.conifer[k], base, sph_bot)
+        return z_top, z_bot
+
+
+def vegetation_class(height_m):
+    """ASPRS class of a plant by its top height above ground: 3 low (< 2 m), 4 medium (< 5 m),
+    5 high. Whole plants get one class, as the method's cluster-height rule does."""
+    h = np.asarray(height_m)
+    return np.where(h < 2.0, 3, np.where(h < 5.0, 4, 5)).astype(np.uint8)
+
+
+# ------------------------------------------------------------------------------------------
+# Power lines
+# ------------------------------------------------------------------------------------------
+
+def catenary_z(s, length, z_a, z_b, c):
+    """Height along a span in its vertical plane: the catenary through (0, z_a) and (length, z_b)
+    with parameter c = H / w (horizontal tension over weight per metre, in metres)."""
+    s0 = length / 2 - c * np.arcsinh((z_b - z_a) / (2 * c * np.sinh(length / (2 * c))))
+    return z_a + c * (np.cosh((s - s0) / c) - np.cosh(s0 / c))
+
+
+def catenary_sag(length, z_a, z_b, c):
+    """Largest vertical distance between the chord and the catenary (metres)."""
+    s = np.linspace(0, length, 2001)
+    chord = z_a + (z_b - z_a) * s / length
+    return float(np.max(chord - catenary_z(s, length, z_a, z_b, c)))
+
+
+@dataclass
+class TowerModel:
+    """A pylon as 3D line segments in its local frame (x across the line, y along it, z up)."""
+
+    name: str
+    segments: np.ndarray  # (n, 2, 3)
+    attachments: dict  # name -> (x, z) offset across the line and height of each wire attachment
+    height_m: float
+
+
+def lattice_tower(height_m=31.0, base_w=6.0, top_w=1.6, arms=((20.0, 7.5), (26.0, 7.5)), earth_z=31.0,
+                  insulator_m=2.5) -> TowerModel:
+    """A lattice transmission tower: four legs, horizontal rings, X bracing, cross arms, a peak."""
+    segs = []
+    z_top_body = max(a[0] for a in arms) + 1.0
+    levels = np.linspace(0, z_top_body, 9)
+
+    def half(z):
+        return base_w / 2 + (top_w / 2 - base_w / 2) * min(z / z_top_body, 1.0)
+
+    corners = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+    for i in range(len(levels) - 1):
+        z0, z1 = levels[i], levels[i + 1]
+        h0, h1 = half(z0), half(z1)
+        for k in range(4):
+            sx, sy = corners[k]
+            tx, ty = corners[(k + 1) % 4]
+            segs.append(((sx * h0, sy * h0, z0), (sx * h1, sy * h1, z1)))  # leg
+            segs.append(((sx * h1, sy * h1, z1), (tx * h1, ty * h1, z1)))  # ring
+            segs.append(((sx * h0, sy * h0, z0), (tx * h1, ty * h1, z1)))  # bracing
+            segs.append(((tx * h0, ty * h0, z0), (sx * h1, sy * h1, z1)))
+    hw = top_w / 2
+    attachments = {}
+    for j, (z_arm, reach) in enumerate(arms):
+        for side in (-1, 1):
+            tip = (side * reach, 0.0, z_arm)
+            for y in (-hw, hw):
+                segs.append(((side * hw, y, z_arm), tip))  # lower chord
+                segs.append(((side * hw, y, z_arm + 1.2), tip))  # upper chord
+            attachments[f"arm{j}_{'L' if side < 0 else 'R'}"] = (side * (reach - 0.5), z_arm - insulator_m)
+    peak = (0.0, 0.0, earth_z)
+    for sx, sy in corners:
+        segs.append(((sx * hw, sy * hw, z_top_body), peak))
+    attachments["earth"] = (0.0, earth_z)
+    return TowerModel("lattice", np.array(segs, float), attachments, earth_z)
+
+
+def wood_pole(height_m=11.0, arm_half_m=1.4) -> TowerModel:
+    segs = [((0, 0, 0), (0, 0, height_m)), ((-arm_half_m, 0, height_m - 1.0), (arm_half_m, 0, height_m - 1.0))]
+    att = {"L": (-1.2, height_m - 0.9), "C": (0.0, height_m + 0.1), "R": (1.2, height_m - 0.9)}
+    return TowerModel("pole", np.array(segs, float), att, height_m)
+
+
+def sample_segments(segments: np.ndarray, spacing_m: float, rng, keep: float = 1.0):
+    """Points along 3D segments at about ``spacing_m`` (jittered), each kept with prob. ``keep``."""
+    out = []
+    for p, q in segments:
+        L = float(np.linalg.norm(q - p))
+        n = max(int(L / spacing_m), 1)
+        t = (np.arange(n) + rng.uniform(0, 1, n)) / n
+        pts = p + t[:, None] * (q - p)
+        out.append(pts[rng.uniform(0, 1, n) < keep])
+    return np.concatenate(out) if out else np.empty((0, 3))

@@ -1,0 +1,502 @@
+"""Synthetic ALS survey scenes with exact truth.
+
+``make_scene(kind, seed, ...)`` returns a :class:`Scene`: points (x, y, z and LAS fields, the
+classification being the truth), the true DTM grid, and truth records for every object
+(buildings and their roof planes, trees, pylons, wires and their catenaries, conductor 2D
+lines and their crossings, water). Deterministic: the same arguments give the same arrays.
+
+The sensor model is a nadir ALS: pulses fall uniformly over the area; each pulse gives one
+return on open ground, roofs, water (rarely) or the bridge deck, and up to four returns in tree
+crowns (first on the crown surface, then inside, the last one on the ground when it gets
+through). Wires and pylons are hit along their length (footprint scatter across them), and the
+pulse goes on to the ground, as a real sensor records it. A few low outliers sit under ground.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .objects import (
+    Building, Trees, catenary_sag, catenary_z, lattice_tower, sample_segments, vegetation_class, wood_pole,
+)
+from .terrain import Terrain
+
+KINDS = ("corridor", "terrain", "roofs")
+DEFAULT_EXTENT = {"corridor": (600.0, 250.0), "terrain": (400.0, 300.0), "roofs": (160.0, 120.0)}
+
+# ASPRS classes used here
+GROUND, LOW_VEG, MED_VEG, HIGH_VEG, BUILDING, NOISE, WATER, WIRE, TOWER, BRIDGE = 2, 3, 4, 5, 6, 7, 9, 14, 15, 17
+
+
+@dataclass
+class Scene:
+    kind: str
+    seed: int
+    origin: tuple[float, float]
+    extent: tuple[float, float]
+    crs: str
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    fields: dict
+    dtm: np.ndarray  # (rows, cols), north-up, cell centres
+    dtm_resolution_m: float
+    truth: dict = field(default_factory=dict)
+    terrain: Terrain | None = None
+
+    @property
+    def dtm_transform(self):
+        from affine import Affine
+
+        ox, oy = self.origin
+        return Affine(self.dtm_resolution_m, 0, ox, 0, -self.dtm_resolution_m, oy + self.extent[1])
+
+
+class _Points:
+    """Collects points of the pulses as they are generated."""
+
+    def __init__(self):
+        self.parts = []
+
+    def add(self, u, v, z, cls, ret, nret, pulse, obj=-1, plane=-1, intensity=None):
+        n = len(u)
+        if n == 0:
+            return
+        full = lambda val, dt: np.broadcast_to(np.asarray(val, dt), (n,)).copy()  # noqa: E731
+        self.parts.append(dict(
+            u=np.asarray(u, float), v=np.asarray(v, float), z=np.asarray(z, float),
+            cls=full(cls, np.uint8), ret=full(ret, np.uint8), nret=full(nret, np.uint8),
+            pulse=full(pulse, np.float64), obj=full(obj, np.int32), plane=full(plane, np.int32),
+            intensity=full(0 if intensity is None else intensity, np.uint16),
+        ))
+
+    def concat(self):
+        return {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
+
+
+def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
+               width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
+               origin=(512000.0, 5403000.0), crs: str = "EPSG:25832") -> Scene:
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}")
+    W, H = DEFAULT_EXTENT[kind]
+    W = float(width_m or W)
+    H = float(height_m or H)
+    rng = np.random.default_rng(seed)
+    terrain = Terrain.random(W, H, rng, features=(kind != "roofs"))
+    if kind == "roofs":
+        terrain.hills = [(h[0], h[1], h[2] * 0.3, h[3] * 1.5) for h in terrain.hills]
+    truth: dict = {"buildings": [], "roof_planes": [], "trees": [], "pylons": [], "wires": [], "spans": [],
+                   "conductor_lines_2d": [], "crossings": [], "water": None, "bridge": None}
+    lines = _power_lines(kind, W, H, rng, terrain) if kind == "corridor" else []
+    buildings = _place_buildings(kind, W, H, rng, terrain, lines)
+    trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
+
+    pts = _Points()
+    # ---- pulses: uniform over the area ------------------------------------------------
+    n_pulses = rng.poisson(density_ppm2 * W * H)
+    u = rng.uniform(0, W, n_pulses)
+    v = rng.uniform(0, H, n_pulses)
+    pulse_id = _gps_time(u, v, H)
+    zg = terrain.height(u, v)
+    taken = np.zeros(n_pulses, bool)
+
+    # buildings (single returns on the roof)
+    plane_base = 0
+    for b in buildings:
+        inside = b.contains(u, v) & ~taken
+        zr, face = b.roof_height(u[inside], v[inside])
+        pts.add(u[inside], v[inside], zr + rng.normal(0, noise_m, inside.sum()), BUILDING, 1, 1,
+                pulse_id[inside], obj=b.id, plane=plane_base + face, intensity=rng.integers(900, 1400, inside.sum()))
+        b._plane_base = plane_base
+        plane_base += len(b.faces)
+        taken |= inside
+
+    # bridge deck
+    if terrain.embankment is not None and terrain.embankment.bridge_at is not None:
+        deck = terrain.embankment.deck_mask(u, v) & ~taken & (terrain.embankment.raise_m(u, v) < terrain.embankment.height_m - 0.05)
+        pts.add(u[deck], v[deck], terrain.deck_height(u[deck], v[deck]) + rng.normal(0, noise_m, deck.sum()),
+                BRIDGE, 1, 1, pulse_id[deck], obj=9000, intensity=700)
+        taken |= deck
+
+    # water: specular, only a few pulses come back
+    water = terrain.water_mask(u, v) & ~taken
+    back = water & (rng.uniform(0, 1, n_pulses) < 0.04)
+    pts.add(u[back], v[back], terrain.pond_level_m + rng.normal(0, noise_m, back.sum()) if back.any() else [],
+            WATER, 1, 1, pulse_id[back], obj=9100, intensity=rng.integers(20, 80, back.sum()))
+    taken |= water
+
+    # vegetation: multiple returns
+    if len(trees):
+        from scipy.spatial import cKDTree
+
+        tree_index = cKDTree(np.column_stack([trees.u, trees.v]))
+        free = np.flatnonzero(~taken)
+        k = min(4, len(trees))
+        dist, idx = tree_index.query(np.column_stack([u[free], v[free]]), k=k, distance_upper_bound=float(trees.radius.max()))
+        dist = dist.reshape(len(free), k)
+        idx = idx.reshape(len(free), k)
+        best_top = np.full(len(free), -np.inf)
+        best_k = np.full(len(free), -1)
+        for j in range(k):
+            ok = idx[:, j] < len(trees)
+            kk = np.where(ok, idx[:, j], 0)
+            inside = ok & (dist[:, j] < trees.radius[kk])
+            ztop, _ = trees.surfaces(kk, dist[:, j])
+            better = inside & (ztop > best_top)
+            best_top = np.where(better, ztop, best_top)
+            best_k = np.where(better, kk, best_k)
+        hit = best_k >= 0
+        pi = free[hit]
+        tk = best_k[hit]
+        r = np.hypot(u[pi] - trees.u[tk], v[pi] - trees.v[tk])
+        ztop, zbot = trees.surfaces(tk, r)
+        n_ret = rng.choice([1, 2, 3, 4], size=len(pi), p=[0.25, 0.35, 0.28, 0.12])
+        reaches_ground = (n_ret >= 2) & (rng.uniform(0, 1, len(pi)) < np.where(trees.conifer[tk], 0.45, 0.6))
+        n_veg = n_ret - reaches_ground
+        first = ztop - np.abs(rng.normal(0, 0.25, len(pi)))
+        first = np.maximum(first, zbot)
+        cls = trees.asprs[tk]
+        for rnum in range(1, 5):
+            sel = n_veg >= rnum
+            if not sel.any():
+                continue
+            if rnum == 1:
+                zz = first[sel]
+            else:  # inside the crown, lower with each return
+                frac = np.sort(rng.uniform(0, 1, (sel.sum(), 3)), axis=1)[:, rnum - 2]
+                zz = first[sel] - frac * (first[sel] - zbot[sel])
+            pts.add(u[pi[sel]], v[pi[sel]], zz + rng.normal(0, noise_m, sel.sum()), cls[sel], rnum, n_ret[sel],
+                    pulse_id[pi[sel]], obj=trees.first_id + tk[sel], intensity=rng.integers(150, 600, sel.sum()))
+        g = reaches_ground
+        pts.add(u[pi[g]], v[pi[g]], zg[pi[g]] + rng.normal(0, noise_m, g.sum()), GROUND, n_ret[g], n_ret[g],
+                pulse_id[pi[g]], intensity=rng.integers(100, 400, g.sum()))
+        taken[pi] = True
+
+    # open ground
+    og = ~taken
+    pts.add(u[og], v[og], zg[og] + rng.normal(0, noise_m, og.sum()), GROUND, 1, 1, pulse_id[og],
+            intensity=rng.integers(300, 900, og.sum()))
+
+    # ---- wires and pylons ---------------------------------------------------------------
+    spacing = 1.2 / np.sqrt(density_ppm2)  # along-wire spacing of hits, as scan lines cross a wire
+    wire_id = 0
+    for line in lines:
+        _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_id, origin)
+        wire_id += 100
+
+    # ---- outliers below ground (multipath) and a few birds ------------------------------
+    n_low = max(3, int(n_pulses * 5e-5))
+    lu, lv = rng.uniform(0, W, n_low), rng.uniform(0, H, n_low)
+    pts.add(lu, lv, terrain.height(lu, lv) - rng.uniform(1.0, 15.0, n_low), NOISE, 1, 1, _gps_time(lu, lv, H), intensity=30)
+    n_high = max(2, n_low // 4)
+    hu, hv = rng.uniform(0, W, n_high), rng.uniform(0, H, n_high)
+    pts.add(hu, hv, terrain.height(hu, hv) + rng.uniform(45.0, 90.0, n_high), NOISE, 1, 1, _gps_time(hu, hv, H), intensity=30)
+
+    allp = pts.concat()
+    order = np.lexsort((allp["ret"], allp["pulse"]))  # acquisition order: by pulse, then return
+    allp = {k: val[order] for k, val in allp.items()}
+    ox, oy = origin
+    fields = {
+        "classification": allp["cls"],
+        "return_number": allp["ret"],
+        "number_of_returns": allp["nret"],
+        "intensity": allp["intensity"],
+        "gps_time": allp["pulse"],
+        "point_source_id": (1 + (allp["v"] // 80.0)).astype(np.uint16),
+        "object_id": allp["obj"],
+        "plane_id": allp["plane"],
+    }
+
+    # ---- truth ---------------------------------------------------------------------------
+    cols = int(np.ceil(W / dtm_resolution_m))
+    rows = int(np.ceil(H / dtm_resolution_m))
+    cu = (np.arange(cols) + 0.5) * dtm_resolution_m
+    cv = H - (np.arange(rows) + 0.5) * dtm_resolution_m
+    UU, VV = np.meshgrid(cu, cv)
+    dtm = terrain.height(UU, VV).astype(np.float32)
+
+    for b in buildings:
+        truth["buildings"].append({
+            "id": b.id, "roof": b.roof, "footprint": (b.footprint_uv() + origin).tolist(),
+            "length_m": b.length_m, "width_m": b.width_m, "heading_deg": float(np.degrees(b.heading_rad)),
+            "eave_z": b.base_z + b.eave_m, "pitch_deg": b.pitch_deg,
+            "top_z": _roof_top(b),
+        })
+        for j, f in enumerate(b.faces):
+            n, d = b.face_plane_world(f, origin)
+            poly = b.face_polygon_uv(f)
+            from shapely import affinity
+
+            poly = affinity.translate(poly, ox, oy)
+            truth["roof_planes"].append({
+                "plane_id": b._plane_base + j, "building_id": b.id, "face": f.name,
+                "normal": n.tolist(), "offset": d, "slope_deg": float(np.degrees(np.arccos(n[2]))),
+                "polygon_wkt": poly.wkt,
+                "n_points": int(np.sum(allp["plane"] == b._plane_base + j)),
+            })
+    for k in range(len(trees)):
+        truth["trees"].append({
+            "id": int(trees.first_id + k), "x": float(trees.u[k] + ox), "y": float(trees.v[k] + oy),
+            "ground_z": float(trees.ground[k]), "top_z": float(trees.top[k]), "radius_m": float(trees.radius[k]),
+            "conifer": bool(trees.conifer[k]), "asprs_class": int(trees.asprs[k]),
+        })
+    if terrain.pond is not None:
+        cu_, cv_, ru, rv = terrain.pond
+        ang = np.linspace(0, 2 * np.pi, 65)
+        truth["water"] = {"level_z": terrain.pond_level_m,
+                          "ring": np.column_stack([cu_ + ox + ru * np.cos(ang), cv_ + oy + rv * np.sin(ang)]).tolist()}
+    if terrain.embankment is not None:
+        e = terrain.embankment
+        truth["bridge"] = {"axis": [[e.p0[0] + ox, e.p0[1] + oy], [e.p1[0] + ox, e.p1[1] + oy]],
+                           "opening_at_m": e.bridge_at, "height_m": e.height_m}
+    _crossings(truth)
+    u_all, v_all = allp["u"], allp["v"]
+    cls_all = allp["cls"]
+    vals, counts = np.unique(cls_all, return_counts=True)
+    truth["class_counts"] = {int(a): int(b) for a, b in zip(vals, counts)}
+    truth["n_points"] = int(len(u_all))
+    truth["n_pulses"] = int(n_pulses)
+    return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
+                 dtm_resolution_m, truth, terrain)
+
+
+def _roof_top(b: Building) -> float:
+    tops = []
+    for f in b.faces:
+        a, bb = np.asarray(f.polygon_ab.exterior.coords).T if f.polygon_ab.geom_type == "Polygon" else \
+            np.concatenate([np.asarray(g.exterior.coords) for g in f.polygon_ab.geoms]).T
+        tops.append(float(np.max(f.z0 + f.ga * a + f.gb * bb)))
+    return max(tops)
+
+
+def _gps_time(u, v, H):
+    """Acquisition time: 80 m wide strips flown west to east at 60 m/s, strips one after another."""
+    strip = np.floor(v / 80.0)
+    return 1.0e5 + strip * 40.0 + u / 60.0 + (v - strip * 80.0) * 1e-5
+
+
+# ------------------------------------------------------------------------------------------
+# layout
+# ------------------------------------------------------------------------------------------
+
+def _power_lines(kind, W, H, rng, terrain):
+    """Line A: a straight double-circuit transmission line across the scene (lattice towers,
+    bundled phases, an earth wire). Line B: a distribution line on wood poles crossing it at a
+    sharp angle, lower."""
+    lines = []
+    ang_a = np.radians(rng.uniform(3, 8))
+    a0 = np.array([-40.0, 0.42 * H - 0.5 * W * np.tan(ang_a)])
+    dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
+    span = 185.0
+    towers = [a0 + dir_a * (60.0 + k * span) for k in range(8)]
+    towers = [t for t in towers if -20 < t[0] < W + 20]
+    model = lattice_tower()
+    wires = []
+    for arm in ("arm0_L", "arm0_R", "arm1_L", "arm1_R"):
+        for sub in (-0.3, 0.3):  # bundle of two, 0.6 m apart
+            wires.append({"attach": arm, "dx": sub, "kind": "phase", "c": 1300.0})
+    wires.append({"attach": "earth", "dx": 0.0, "kind": "earth", "c": 1600.0})
+    lines.append({"name": "A", "model": model, "towers": towers, "dir": dir_a, "wires": wires, "voltage_kv": 110})
+    # line B: crosses A at 20-30 degrees, near the middle of the scene
+    ang_b = ang_a + np.radians(rng.uniform(20, 30))
+    mid = a0 + dir_a * (0.5 * W / np.cos(ang_a) + 40.0)
+    dir_b = np.array([np.cos(ang_b), np.sin(ang_b)])
+    poles = [mid + dir_b * (-35.0 + 70.0 * k) for k in range(-5, 6)]
+    poles = [p for p in poles if 5 < p[0] < W - 5 and 5 < p[1] < H - 5]
+    poles = [p for p in poles if not terrain.excluded(p[0], p[1], 1.0)]
+    lines.append({"name": "B", "model": wood_pole(), "towers": poles, "dir": dir_b,
+                  "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 700.0} for a in ("L", "C", "R")],
+                  "voltage_kv": 20})
+    return lines
+
+
+def _line_distance(u, v, line):
+    d = line["dir"]
+    p = line["towers"][0]
+    return np.abs(-(u - p[0]) * d[1] + (v - p[1]) * d[0])
+
+
+def _place_buildings(kind, W, H, rng, terrain, lines):
+    specs = []
+    if kind == "roofs":
+        specs = [("hip_dormer", 16.0, 11.0), ("hip", 14.0, 10.0), ("gable", 12.0, 9.0), ("flat", 22.0, 14.0),
+                 ("gable", 30.0, 18.0), ("hip", 11.0, 9.0), ("flat", 5.0, 4.0), ("gable", 9.0, 7.0)]
+    else:
+        specs = [("hip_dormer", 16.0, 11.0), ("flat", 60.0, 40.0), ("gable", 34.0, 20.0), ("hip", 14.0, 10.0),
+                 ("gable", 12.0, 9.0), ("hip", 12.0, 9.5), ("gable", 10.0, 8.0), ("flat", 18.0, 12.0),
+                 ("flat", 4.0, 3.0), ("gable", 5.0, 4.0), ("flat", 3.5, 3.0), ("gable", 11.0, 8.5),
+                 ("hip", 13.0, 10.0), ("flat", 25.0, 15.0)]
+    placed: list[Building] = []
+    want_near = bool(lines)  # one house stands next to line A
+    for roof, L, Wd in specs:
+        near = want_near and roof in ("gable", "hip") and L <= 14
+        for _try in range(400):
+            heading = np.pi / 2 if roof == "hip_dormer" else rng.uniform(0, np.pi)  # test building: faces E/W
+            cu, cv = rng.uniform(L / 2 + 8, W - L / 2 - 8), rng.uniform(L / 2 + 8, H - L / 2 - 8)
+            b = Building(len(placed) + 1, cu, cv, L, Wd, heading, 0.0, roof)
+            fp = b.footprint_uv()
+            ring = np.vstack([fp, fp.mean(0), (fp + fp.mean(0)) / 2])
+            if terrain.excluded(ring[:, 0], ring[:, 1], 3.0).any():
+                continue
+            if any(o.contains(ring[:, 0], ring[:, 1], margin=6.0).any() or
+                   b.contains(*o.footprint_uv().T, margin=6.0).any() for o in placed):
+                continue
+            ok = True
+            for line in lines:
+                dmin = _line_distance(ring[:, 0], ring[:, 1], line).min()
+                ok &= (13.0 <= dmin <= 22.0) if (near and line["name"] == "A") else (dmin > 25.0)
+                towers = np.array(line["towers"]).reshape(-1, 2)
+                if len(towers) and np.min(np.hypot(towers[:, 0] - cu, towers[:, 1] - cv)) < L + 10:
+                    ok = False
+            if ok:
+                want_near = want_near and not near
+                break
+        else:
+            continue
+        eave = {"flat": rng.uniform(3.0, 10.0) if L > 15 else rng.uniform(2.4, 3.5),
+                "gable": rng.uniform(3.0, 8.0), "hip": rng.uniform(4.0, 7.0), "hip_dormer": 6.0}[roof]
+        if L <= 5:
+            eave = rng.uniform(2.3, 3.0)
+        b.eave_m = float(eave)
+        b.pitch_deg = {"flat": 0.0, "gable": rng.uniform(25, 42) if L < 20 else rng.uniform(12, 20),
+                       "hip": rng.uniform(28, 40), "hip_dormer": 35.0}[roof]
+        fpx = np.vstack([b.footprint_uv(), [[cu, cv]]])
+        b.base_z = float(terrain.height(fpx[:, 0], fpx[:, 1]).max())
+        if roof == "hip_dormer":
+            # gable dormer on the north (in the building frame) main face, below the main ridge
+            t = np.tan(np.radians(b.pitch_deg))
+            b.dormer = (-0.15 * L, 2.6, Wd / 2 - 1.2, b.eave_m + t * (Wd / 2) - 0.9, 40.0)
+        b.build_faces()
+        placed.append(b)
+    return placed
+
+
+def _place_trees(kind, W, H, rng, terrain, buildings, lines):
+    n_forest = {"corridor": 260, "terrain": 320, "roofs": 25}[kind]
+    n_bush = {"corridor": 120, "terrain": 140, "roofs": 20}[kind]
+    # clustered: a few stands plus scattered trees
+    centres = rng.uniform([0, 0], [W, H], (5, 2))
+    pick = rng.integers(0, 5, n_forest)
+    pos = centres[pick] + rng.normal(0, 22, (n_forest, 2))
+    scattered = rng.uniform([0, 0], [W, H], (n_forest // 3, 2))
+    bushes = rng.uniform([0, 0], [W, H], (n_bush, 2))
+    pos = np.vstack([pos, scattered, bushes])
+    is_bush = np.r_[np.zeros(len(pos) - n_bush, bool), np.ones(n_bush, bool)]
+    u, v = pos[:, 0], pos[:, 1]
+    ok = (u > 2) & (u < W - 2) & (v > 2) & (v < H - 2) & ~terrain.excluded(u, v, 1.0)
+    for b in buildings:
+        ok &= ~b.contains(u, v, margin=6.0)
+    for line in lines:
+        towers = np.array(line["towers"])
+        if len(towers):
+            dt = np.min(np.hypot(u[:, None] - towers[None, :, 0], v[:, None] - towers[None, :, 1]), axis=1)
+            ok &= dt > 9.0
+    u, v, is_bush = u[ok], v[ok], is_bush[ok]
+    n = len(u)
+    height = np.where(is_bush, rng.uniform(0.6, 1.8, n), rng.uniform(6.0, 24.0, n))
+    small = ~is_bush & (rng.uniform(0, 1, n) < 0.15)
+    height = np.where(small, rng.uniform(2.5, 4.8, n), height)
+    if lines:
+        # trees under line A stay below the conductors (utilities trim them)
+        under = _line_distance(u, v, lines[0]) < 12.0
+        height = np.where(under & ~is_bush, np.minimum(height, rng.uniform(5.0, 11.0, n)), height)
+    radius = np.where(is_bush, rng.uniform(0.5, 1.4, n), np.clip(height * rng.uniform(0.18, 0.3, n), 1.2, 5.5))
+    conifer = ~is_bush & (rng.uniform(0, 1, n) < 0.35)
+    base_rel = np.where(is_bush, 0.1, height * rng.uniform(0.25, 0.5, n))
+    ground = terrain.height(u, v)
+    return Trees(u, v, ground, ground + height, ground + base_rel, radius, conifer, vegetation_class(height),
+                 first_id=10000)
+
+
+def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origin):
+    ox, oy = origin
+    model = line["model"]
+    d = line["dir"]
+    across = np.array([-d[1], d[0]])  # +x of the tower frame
+    heading = float(np.arctan2(d[1], d[0]))
+    towers = line["towers"]
+    for ti, t in enumerate(towers):
+        zb = float(terrain.height(t[0], t[1]))
+        pid = int(2000 + wire_base + ti)
+        truth["pylons"].append({"id": pid, "line": line["name"], "model": model.name, "x": float(t[0] + ox),
+                                "y": float(t[1] + oy), "z": zb, "heading_deg": float(np.degrees(heading) % 360.0),
+                                "roll_deg": 0.0, "pitch_deg": 0.0, "height_m": model.height_m})
+        local = sample_segments(model.segments, 0.3, rng, keep=0.55)
+        # tower frame: x across the line, y along it
+        uu = t[0] + local[:, 0] * across[0] + local[:, 1] * d[0]
+        vv = t[1] + local[:, 0] * across[1] + local[:, 1] * d[1]
+        zz = zb + local[:, 2] + rng.normal(0, noise_m, len(local))
+        tp = _gps_time(uu, vv, 1e9) + 1e-4
+        pts.add(uu, vv, zz, TOWER, 1, 2, tp, obj=pid, intensity=500)
+        pts.add(uu, vv, terrain.height(uu, vv) + rng.normal(0, noise_m, len(uu)), GROUND, 2, 2, tp, intensity=300)
+    for wi, w in enumerate(line["wires"]):
+        wid = wire_base + wi
+        dx_att, z_att = model.attachments[w["attach"]]
+        off = dx_att + w["dx"]
+        ends = [np.asarray(t) + across * off for t in towers]
+        zs = [float(terrain.height(t[0], t[1])) + z_att for t in towers]
+        truth["wires"].append({"id": wid, "line": line["name"], "kind": w["kind"], "attach": w["attach"],
+                               "offset_m": float(off), "catenary_c_m": w["c"]})
+        for si in range(len(towers) - 1):
+            pa, pb = ends[si], ends[si + 1]
+            L = float(np.hypot(*(pb - pa)))
+            za, zb_ = zs[si], zs[si + 1]
+            n = int(L / spacing)
+            s = np.sort(rng.uniform(0, L, n))
+            # gaps: stretches without hits, as real scans have
+            keep = np.ones(n, bool)
+            for _ in range(rng.poisson(L / 45.0)):
+                g0 = rng.uniform(0, L)
+                keep &= ~((s > g0) & (s < g0 + rng.uniform(0.8, 4.0)))
+            s = s[keep]
+            t_ = (pb - pa) / L
+            lat = rng.normal(0, 0.04, len(s))  # footprint scatter across the wire
+            uu = pa[0] + s * t_[0] + lat * -t_[1]
+            vv = pa[1] + s * t_[1] + lat * t_[0]
+            zz = catenary_z(s, L, za, zb_, w["c"]) + rng.normal(0, 0.03, len(s))
+            inside = (uu >= 0) & (uu <= terrain.width_m) & (vv >= 0) & (vv <= terrain.height_m)
+            uu, vv, zz, s = uu[inside], vv[inside], zz[inside], s[inside]
+            tp = _gps_time(uu, vv, 1e9) + 2e-4 + wid * 1e-6
+            pts.add(uu, vv, zz, WIRE, 1, 2, tp, obj=wid, intensity=rng.integers(40, 160, len(uu)))
+            pts.add(uu, vv, terrain.height(uu, vv) + rng.normal(0, noise_m, len(uu)), GROUND, 2, 2, tp,
+                    intensity=rng.integers(200, 600, len(uu)))
+            ss = np.linspace(0, L, 60)
+            curve = np.column_stack([pa[0] + ss * t_[0] + ox, pa[1] + ss * t_[1] + oy, catenary_z(ss, L, za, zb_, w["c"])])
+            truth["spans"].append({"wire_id": wid, "line": line["name"], "span": si, "length_m": L,
+                                   "a": [float(pa[0] + ox), float(pa[1] + oy), za], "b": [float(pb[0] + ox), float(pb[1] + oy), zb_],
+                                   "catenary_c_m": w["c"], "sag_m": catenary_sag(L, za, zb_, w["c"]),
+                                   "n_points": int(len(uu)), "curve": curve.tolist()})
+    # the 2D conductor lines: one per distinct plan offset (stacked wires share one)
+    offsets = sorted({round(w["offset_m"], 3) for w in truth["wires"] if w["line"] == line["name"]})
+    if len(towers) >= 2:
+        p0, p1 = np.asarray(towers[0]), np.asarray(towers[-1])
+        for off in offsets:
+            ids = [w["id"] for w in truth["wires"] if w["line"] == line["name"] and round(w["offset_m"], 3) == off]
+            a = p0 + across * off
+            b = p1 + across * off
+            truth["conductor_lines_2d"].append({"line": line["name"], "offset_m": off, "wire_ids": ids,
+                                                "a": [float(a[0] + ox), float(a[1] + oy)],
+                                                "b": [float(b[0] + ox), float(b[1] + oy)]})
+
+
+def _crossings(truth):
+    """2D crossings of every pair of conductor lines of different power lines."""
+    from shapely.geometry import LineString
+
+    L = truth["conductor_lines_2d"]
+    for i in range(len(L)):
+        for j in range(i + 1, len(L)):
+            if L[i]["line"] == L[j]["line"]:
+                continue
+            a, b = LineString([L[i]["a"], L[i]["b"]]), LineString([L[j]["a"], L[j]["b"]])
+            p = a.intersection(b)
+            if p.is_empty or p.geom_type != "Point":
+                continue
+            da = np.subtract(L[i]["b"], L[i]["a"])
+            db = np.subtract(L[j]["b"], L[j]["a"])
+            cosang = abs(np.dot(da, db)) / (np.linalg.norm(da) * np.linalg.norm(db))
+            truth["crossings"].append({"x": p.x, "y": p.y, "lines": [i, j],
+                                       "angle_deg": float(np.degrees(np.arccos(np.clip(cosang, -1, 1))))})
