@@ -232,10 +232,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("toolbox: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into head & co.
+        return 0
     except Exception as exc:  # a plugin's bug: one line, the traceback with -v
         log.debug("unexpected error", exc_info=True)
-        name = getattr(args, "algorithm", None)
-        where = f"algorithm {name!r} failed" if name else "failed"
+        name = getattr(args, "algorithm", None) if args.command == "run" else None
+        where = f"algorithm {name!r} failed" if name else f"{args.command} failed"
         print(f"toolbox: error: {where}: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
               "(run with -vv for the traceback)", file=sys.stderr)
         return 1

@@ -47,6 +47,8 @@ class PointCloud:
     header: object | None = None  # laspy.LasHeader
     horizontal_unit_m: float = 1.0
     vertical_unit_m: float = 1.0
+    #: free metadata; ``creation_date`` (datetime.date) fixes the LAS header date (reproducible files)
+    meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.x = np.ascontiguousarray(self.x, dtype=np.float64)
@@ -371,6 +373,8 @@ def _header_for(pc: PointCloud):
         header.generating_software = "lidar-toolbox"
         return header
     header = laspy.LasHeader(version="1.4", point_format=6)
+    if "creation_date" in pc.meta:
+        header.creation_date = pc.meta["creation_date"]
     if len(pc):
         header.offsets = [np.floor(pc.x.min()), np.floor(pc.y.min()), np.floor(pc.z.min())]
     header.scales = [0.001, 0.001, 0.001]

@@ -1,0 +1,1 @@
+"""Example third-party plugin for lidar-toolbox: point density rasters."""

@@ -1,0 +1,96 @@
+"""Adapter of the synthetic scene generator: parameters, outputs (LAZ, truth GeoPackage and JSON,
+true DTM). The generator itself is ``toolbox.synthetic`` (pure numpy)."""
+
+from __future__ import annotations
+
+import toolbox
+from toolbox import Algorithm, Output, Parameter, UsageError
+
+MAX_POINTS = 200_000_000
+KINDS = ("corridor", "terrain", "roofs")
+
+
+def _run(inputs, params, ctx):
+    import datetime
+
+    import numpy as np
+
+    from toolbox.io.points import PointCloud, parse_crs
+    from toolbox.io.rasters import Raster
+    from toolbox.synthetic import make_scene
+
+    from .truth import truth_layers, truth_json
+
+    from toolbox.synthetic.scene import DEFAULT_EXTENT
+
+    W0, H0 = DEFAULT_EXTENT[params["kind"]]
+    W = params["width_m"] or W0
+    H = params["height_m"] or H0
+    expected = params["density_ppm2"] * W * H
+    if expected > MAX_POINTS:
+        raise UsageError(
+            f"synthetic-scene: {W:g} x {H:g} m at {params['density_ppm2']:g} pts/m2 would be about "
+            f"{expected / 1e6:.0f} million points (limit {MAX_POINTS / 1e6:.0f} million); lower density_ppm2 or the extent"
+        )
+    crs = parse_crs(params["crs"])
+    if not crs.is_projected:
+        raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
+    scene = make_scene(params["kind"], params["seed"], params["density_ppm2"], params["noise_m"], W, H,
+                       params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"])
+    pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
+                    meta={"creation_date": datetime.date(2026, 1, 1)})
+    dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
+                 description="true bare-earth DTM of the synthetic scene (cell centres)")
+    stats = {"n_points": len(pc), "kind": scene.kind, "seed": scene.seed,
+             "density_ppm2_measured": round(len(pc) / (W * H), 3),
+             "n_buildings": len(scene.truth["buildings"]), "n_roof_planes": len(scene.truth["roof_planes"]),
+             "n_trees": len(scene.truth["trees"]), "n_wires": len(scene.truth["wires"]),
+             "n_pylons": len(scene.truth["pylons"]), "n_crossings": len(scene.truth["crossings"])}
+    return toolbox.Result(
+        outputs={"points": pc, "truth": truth_layers(scene, crs), "truth_json": truth_json(scene), "dtm": dtm},
+        stats=stats,
+    )
+
+
+@toolbox.hookimpl
+def toolbox_algorithms():
+    return [Algorithm(
+        id="synthetic-scene",
+        title="Synthetic ALS scene with exact truth",
+        run=_run,
+        description=(
+            "Generates a deterministic airborne laser-scanning scene in a projected CRS: terrain with hills, "
+            "a steep slope, a ridge, a ditch, an embankment with a bridge and a pond; buildings from sheds to "
+            "60 m halls with flat, gable, hip and hip-with-dormer roofs; trees and bushes with multiple returns; "
+            "low outliers; and for kind=corridor a double-circuit transmission line on lattice pylons (bundled "
+            "phases, earth wire) crossed at a sharp angle by a lower distribution line. Writes the points (the "
+            "classification is the truth), the truth as GeoPackage and JSON, and the true DTM."
+        ),
+        reference="Scene truth for the methods of Grigillo et al. 2015 (power lines), Mongus & Žalik 2014 (DTM), "
+                  "Borowiec (roof planes, test building with a gable dormer); see METHODS.md.",
+        parameters=[
+            Parameter("kind", str, "corridor", "scene kind", choices=KINDS),
+            Parameter("seed", int, 1, "random seed; the same seed gives the same file", minimum=0, maximum=2**31 - 1),
+            Parameter("density_ppm2", float, 12.0, "mean pulse density", unit="pts/m2", minimum=0.0,
+                      exclusive_minimum=True, maximum=400.0),
+            Parameter("noise_m", float, 0.03, "standard deviation of the range noise", unit="m", minimum=0.0, maximum=1.0),
+            Parameter("width_m", float, None, "east-west extent (auto: 600 corridor, 400 terrain, 160 roofs)",
+                      unit="m", minimum=50.0, maximum=20000.0, allow_auto=True),
+            Parameter("height_m", float, None, "north-south extent (auto: 250 corridor, 300 terrain, 120 roofs)",
+                      unit="m", minimum=50.0, maximum=20000.0, allow_auto=True),
+            Parameter("dtm_resolution_m", float, 1.0, "cell size of the true DTM raster", unit="m",
+                      minimum=0.1, maximum=20.0),
+            Parameter("origin_x", float, 512000.0, "easting of the south-west corner", unit="m"),
+            Parameter("origin_y", float, 5403000.0, "northing of the south-west corner", unit="m"),
+            Parameter("crs", str, "EPSG:25832", "projected CRS (metres) of the coordinates"),
+        ],
+        inputs=[],
+        outputs=[
+            Output("points", "points", "the point cloud; classification = ASPRS truth class; extra dimensions "
+                   "object_id and plane_id tie points to truth objects and roof planes"),
+            Output("truth", "vector", "truth layers: conductors 2D, catenaries, crossings, roof planes, buildings, "
+                   "pylons, trees, water", suffix="_truth"),
+            Output("truth_json", "json", "the same truth as JSON, with class counts and scene parameters", suffix="_truth"),
+            Output("dtm", "raster", "true bare-earth DTM", style="dtm"),
+        ],
+    )]
