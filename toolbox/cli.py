@@ -86,6 +86,8 @@ def _setup(args) -> None:
     elif getattr(args, "verbose", 0) == 1:
         level = logging.INFO
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    # laspy logs reader failures itself; the host reports them as one line
+    logging.getLogger("laspy").setLevel(logging.DEBUG if level == logging.DEBUG else logging.CRITICAL)
     progress.set_quiet(getattr(args, "quiet", False) or getattr(args, "json", False))
     kernels.set_arch(getattr(args, "arch", None))
 

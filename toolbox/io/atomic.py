@@ -20,6 +20,8 @@ def check_writable(path: Path, overwrite: bool) -> None:
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.exists():
         raise DataError(f"output folder {str(parent)!r} does not exist; create it first")
+    if not parent.is_dir():
+        raise DataError(f"output folder {str(parent)!r} is a file, not a folder; choose another output location")
     if not os.access(parent, os.W_OK):
         raise DataError(f"output folder {str(parent)!r} is not writable; choose another output location")
 

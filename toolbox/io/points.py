@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
@@ -284,7 +285,9 @@ def _read_ascii(path: Path) -> PointCloud:
                     first = line
                     break
         delim = "," if "," in first else None
-        data = np.loadtxt(path, delimiter=delim, comments="#", ndmin=2, dtype=np.float64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            data = np.loadtxt(path, delimiter=delim, comments="#", ndmin=2, dtype=np.float64)
     except ValueError as exc:
         raise DataError(f"input {str(path)!r} is not an ASCII 'X Y Z [label]' file ({_short(str(exc))})") from None
     if data.size == 0:

@@ -1,0 +1,59 @@
+"""Plugins for registry tests: good ones, broken ones, clashing ones (loaded by entry point)."""
+
+import numpy as np
+
+import toolbox
+from toolbox import Algorithm, Input, Output, Parameter
+
+
+def _echo(inputs, params, ctx):
+    pc = inputs["points"]
+    pc.require_points("echo")
+    cls = np.full(len(pc), params["value"], np.uint8)
+    return {"points": pc.with_fields(classification=cls)}
+
+
+def _fail_midway(inputs, params, ctx):
+    raise RuntimeError("boom in the middle")
+
+
+def _alg(id_, run=_echo):
+    return Algorithm(
+        id=id_, title="test " + id_, description="test algorithm", run=run,
+        parameters=[Parameter("value", int, 1, "class to set", minimum=0, maximum=255),
+                    Parameter("cell_size_m", float, 0.5, "cell", unit="m", minimum=0.0, exclusive_minimum=True,
+                              maximum=100.0),
+                    Parameter("mode", str, "fast", "mode", choices=("fast", "exact"))],
+        inputs=[Input("points", "points", "a cloud")],
+        outputs=[Output("points", "points", "the cloud, classified")],
+    )
+
+
+class Good:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        return [_alg("echo-class"), _alg("fail-midway", _fail_midway)]
+
+
+class Clash:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        return [_alg("echo-class")]
+
+
+class Raises:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        raise ValueError("this plugin is broken on purpose")
+
+
+class WrongType:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        return ["not an algorithm"]
+
+
+good = Good()
+clash = Clash()
+raises = Raises()
+wrong_type = WrongType()
