@@ -50,6 +50,10 @@ def taichi():
     with _lock:
         if _ti is not None:
             return _ti
+        if not os.environ.get("HOME"):  # taichi's runtime aborts without a home folder (bare CI, services)
+            import tempfile
+
+            os.environ["HOME"] = tempfile.gettempdir()
         with contextlib.redirect_stdout(io.StringIO()):  # taichi prints a banner on import
             import taichi as ti
         arch = requested_arch()

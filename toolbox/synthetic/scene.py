@@ -304,9 +304,14 @@ def _power_lines(kind, W, H, rng, terrain):
     ang_b = ang_a + np.radians(rng.uniform(20, 30))
     mid = a0 + dir_a * (0.5 * W / np.cos(ang_a) + 40.0)
     dir_b = np.array([np.cos(ang_b), np.sin(ang_b)])
-    poles = [mid + dir_b * (-35.0 + 70.0 * k) for k in range(-5, 6)]
-    poles = [p for p in poles if 5 < p[0] < W - 5 and 5 < p[1] < H - 5]
-    poles = [p for p in poles if not terrain.excluded(p[0], p[1], 1.0)]
+    poles = []
+    for k in range(-6, 7):
+        # a pole that would stand in the ditch, the pond or on the embankment moves along the line
+        for shift in (0.0, 6.0, -6.0, 12.0, -12.0, 18.0, -18.0, 24.0, -24.0):
+            p = mid + dir_b * (-35.0 + 70.0 * k + shift)
+            if 5 < p[0] < W - 5 and 5 < p[1] < H - 5 and not terrain.excluded(p[0], p[1], 1.0):
+                poles.append(p)
+                break
     lines.append({"name": "B", "model": wood_pole(), "towers": poles, "dir": dir_b,
                   "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 700.0} for a in ("L", "C", "R")],
                   "voltage_kv": 20})

@@ -1,0 +1,141 @@
+"""Pipelines (data only, stages chained) and batches (a bad file never stops the others)."""
+
+import json
+import os
+
+import laspy
+import numpy as np
+
+from importlib.metadata import EntryPoint
+
+from toolbox.registry import discover
+from toolbox.runner import run_algorithm
+
+
+def test_pipeline_chains_stages_by_reference(cli, example_plugin_site, tmp_path):
+    p = tmp_path / "p.yml"
+    p.write_text(f"""
+pipeline:
+  - algorithm: synthetic-scene
+    name: scene
+    output: {tmp_path}/scene.laz
+    params: {{kind: roofs, seed: 4, density_ppm2: 2}}
+  - algorithm: point-density
+    inputs: ["@scene"]
+    output: {tmp_path}/density.tif
+    params: {{cell_size_m: 4}}
+  - algorithm: point-density
+    inputs: ["@scene.points"]
+    params: {{returns: first}}
+""")
+    r = cli("pipeline", p, "--json", site=example_plugin_site)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert [s["algorithm"] for s in rep["stages"]] == ["synthetic-scene", "point-density", "point-density"]
+    assert rep["stages"][1]["inputs"]["points"] == str(tmp_path / "scene.laz")
+    assert rep["stages"][2]["outputs"]["density"]["path"] is None  # no output given: temporary
+    assert (tmp_path / "density.tif").exists()
+    assert sorted(x.name for x in tmp_path.iterdir()) == sorted(
+        ["p.yml", "scene.laz", "scene_truth.gpkg", "scene_truth.json", "scene_dtm.tif", "scene_dtm.qml",
+         "density.tif", "density.qml"])
+
+
+def test_pipeline_default_input_is_previous_output_and_json_works(cli, example_plugin_site, tmp_path):
+    p = tmp_path / "p.json"
+    p.write_text(json.dumps([
+        {"algorithm": "synthetic-scene", "output": str(tmp_path / "s.laz"), "params": {"kind": "roofs", "density_ppm2": 1}},
+        {"algorithm": "point-density", "output": str(tmp_path / "d.tif")},
+    ]))
+    r = cli("pipeline", p, site=example_plugin_site)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "d.tif").exists()
+
+
+def test_pipeline_file_is_data_only(cli, tmp_path):
+    p = tmp_path / "evil.yml"
+    p.write_text(f"""
+pipeline:
+  - algorithm: !!python/object/apply:os.system ["touch {tmp_path}/pwned"]
+""")
+    r = cli("pipeline", p)
+    assert r.returncode == 2
+    assert "not valid YAML/JSON" in r.stderr
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_pipeline_is_validated_before_the_first_stage_runs(cli, tmp_path):
+    p = tmp_path / "p.yml"
+    p.write_text(f"""
+pipeline:
+  - algorithm: synthetic-scene
+    output: {tmp_path}/s.laz
+  - algorithm: synthetic-scene
+    output: {tmp_path}/t.laz
+    params: {{densty_ppm2: 3}}
+""")
+    r = cli("pipeline", p)
+    assert r.returncode == 2
+    assert "stage 2" in r.stderr and "did you mean 'density_ppm2'" in r.stderr
+    assert not (tmp_path / "s.laz").exists()
+    p.write_text("pipeline:\n  - algorithm: synthetic-scene\n    command: rm -rf /\n")
+    r = cli("pipeline", p)
+    assert r.returncode == 2 and "unknown key(s) ['command']" in r.stderr
+
+
+def test_batch_runs_every_file_and_reports_the_bad_one(cli, example_plugin_site, small_scene, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    las = laspy.read(small_scene)
+    for i in range(3):
+        las.write(src / f"tile{i}.laz")
+    (src / "tile_bad.laz").write_bytes(b"garbage" * 100)
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli("run", "point-density", src, "-o", out, "--json", "--set", "cell_size_m=10", site=example_plugin_site)
+    assert r.returncode == 1  # one failed
+    rep = json.loads(r.stdout)
+    assert rep["n_files"] == 4 and rep["n_done"] == 3 and rep["n_failed"] == 1
+    assert rep["failed"][0]["input"].endswith("tile_bad.laz")
+    assert "not a LAS/LAZ file" in rep["failed"][0]["error"]
+    assert sorted(p.name for p in out.glob("*.tif")) == ["tile0.tif", "tile1.tif", "tile2.tif"]
+    assert not list(out.glob("tile_bad*"))
+    r = cli("run", "point-density", src / "tile0.laz", src / "tile_bad.laz", "-o", out, "--overwrite", site=example_plugin_site)
+    assert r.returncode == 1
+    assert "1 of 2 files done, 1 failed" in r.stdout and "FAILED" in r.stdout
+
+
+def test_algorithm_failing_midway_leaves_no_output(small_scene, tmp_path):
+    reg = discover([EntryPoint(name="good", value="plugins_for_tests.fakes:good", group="toolbox.plugins")])
+    out = tmp_path / "x.laz"
+    try:
+        run_algorithm("fail-midway", [str(small_scene)], out, {}, reg=reg)
+    except RuntimeError as e:
+        assert "boom" in str(e)
+    assert list(tmp_path.iterdir()) == []
+    rep = run_algorithm("echo-class", [str(small_scene)], out, {"value": 7}, reg=reg)
+    assert rep["outputs"]["points"]["classes"] == {7: rep["outputs"]["points"]["n_points"]}
+
+
+def test_python_api_mirrors_the_cli(tmp_path):
+    import toolbox
+
+    rep = toolbox.run("synthetic-scene", output=tmp_path / "s.laz", kind="roofs", density_ppm2=1.0, seed=9)
+    assert rep["parameters"]["seed"] == 9 and rep["parameters"]["noise_m"] == 0.03
+    pc = laspy.read(tmp_path / "s.laz")
+    assert len(pc.points) == rep["outputs"]["points"]["n_points"]
+    assert np.all(np.isin(np.unique(pc.classification), [2, 3, 4, 5, 6, 7, 9, 17]))
+
+
+def test_taichi_is_initialised_lazily_in_one_place():
+    import subprocess
+    import sys
+
+    code = ("import toolbox.kernels as k; assert k.arch_used() is None; "
+            "import sys; assert 'taichi' not in sys.modules; ti = k.taichi(); "
+            "assert k.taichi() is ti; print('ARCH', k.arch_used())")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={"TOOLBOX_ARCH": "cpu"})  # no HOME either: a bare service environment
+    assert r.returncode == 0, r.stderr
+    assert "ARCH x64" in r.stdout
+    r = subprocess.run([sys.executable, "-c", "import toolbox.kernels as k; k.taichi()"], capture_output=True, text=True,
+                       env=dict(os.environ, TOOLBOX_ARCH="tpu"))
+    assert r.returncode != 0 and "TOOLBOX_ARCH='tpu' is not known" in r.stderr

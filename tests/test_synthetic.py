@@ -1,0 +1,186 @@
+"""Synthetic scenes: deterministic, plausible, and their truth agrees with their points."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+import toolbox
+from toolbox.synthetic import make_scene
+from toolbox.synthetic.objects import catenary_z
+
+
+@pytest.fixture(scope="module")
+def corridor():
+    return make_scene("corridor", seed=5, density_ppm2=6.0)
+
+
+def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
+    digests = []
+    for name, seed in (("a", 11), ("b", 11), ("c", 12)):
+        toolbox.run("synthetic-scene", output=tmp_path / f"{name}.laz", kind="roofs", seed=seed, density_ppm2=3.0)
+        digests.append(hashlib.sha256((tmp_path / f"{name}.laz").read_bytes()).hexdigest())
+    assert digests[0] == digests[1]
+    assert digests[0] != digests[2]
+    ja = json.loads((tmp_path / "a_truth.json").read_text())
+    jb = json.loads((tmp_path / "b_truth.json").read_text())
+    assert ja == jb
+
+
+def test_density_class_shares_and_returns_are_plausible(corridor):
+    s = corridor
+    W, H = s.extent
+    n = len(s.x)
+    # pulses at the asked density; points a little more (multiple returns, wires, towers)
+    assert s.truth["n_pulses"] / (W * H) == pytest.approx(6.0, rel=0.02)
+    assert 1.0 < n / s.truth["n_pulses"] < 1.25
+    cls = s.fields["classification"]
+    share = {c: np.mean(cls == c) for c in (2, 3, 4, 5, 6, 7, 9, 14, 15, 17)}
+    assert 0.75 < share[2] < 0.95
+    assert 0.02 < share[5] < 0.15 and share[3] > 0 and share[4] > 0
+    assert 0.01 < share[6] < 0.06
+    assert 0 < share[7] < 0.001
+    assert share[9] < 0.002  # water returns are rare
+    assert share[14] > 0.002 and share[15] > 0 and share[17] > 0
+    rn, nr = s.fields["return_number"], s.fields["number_of_returns"]
+    assert np.all((rn >= 1) & (rn <= nr) & (nr <= 4))
+    veg = np.isin(cls, [3, 4, 5])
+    assert np.mean(nr[veg] > 1) > 0.6  # crowns give multiple returns
+    assert np.all(nr[cls == 6] == 1)  # roofs single
+    # every pulse's returns come in order, last returns of vegetation pulses reach the ground
+    gt = s.fields["gps_time"]
+    assert np.all(np.diff(gt) >= 0)
+    last_in_veg_pulse = (rn == nr) & (nr > 1) & (cls == 2)
+    assert last_in_veg_pulse.sum() > 0.2 * np.sum((rn == 1) & (nr > 1) & veg)
+
+
+def test_ground_points_lie_on_the_true_dtm(corridor):
+    s = corridor
+    g = s.fields["classification"] == 2
+    zt = s.terrain.height(s.x[g] - s.origin[0], s.y[g] - s.origin[1])
+    d = s.z[g] - zt
+    assert abs(d.mean()) < 0.003 and d.std() == pytest.approx(0.03, rel=0.05)
+    # the raster is the same function at the cell centres
+    r, c = 37, 211
+    u = (c + 0.5) * s.dtm_resolution_m
+    v = s.extent[1] - (r + 0.5) * s.dtm_resolution_m
+    assert s.dtm[r, c] == pytest.approx(s.terrain.height(u, v), abs=1e-3)
+    # below-ground outliers really are below
+    low = (s.fields["classification"] == 7) & (s.z < s.terrain.height(s.x - s.origin[0], s.y - s.origin[1]))
+    assert low.sum() >= 3
+
+
+def test_terrain_has_the_hard_cases():
+    s = make_scene("terrain", seed=2, density_ppm2=1.0)
+    dz_dy, dz_dx = np.gradient(s.dtm.astype(float), s.dtm_resolution_m)
+    slope = np.degrees(np.arctan(np.hypot(dz_dx, dz_dy)))
+    assert slope.max() > 35  # steep slope / embankment sides
+    assert s.truth["bridge"] is not None and np.sum(s.fields["classification"] == 17) > 0
+    assert s.truth["water"] is not None
+    lengths = sorted(b["length_m"] for b in s.truth["buildings"])
+    assert lengths[0] <= 4 and lengths[-1] >= 60  # sheds to 60 m halls
+    assert {b["roof"] for b in s.truth["buildings"]} == {"flat", "gable", "hip", "hip_dormer"}
+
+
+def test_every_roof_plane_refits_from_its_points(corridor):
+    s = corridor
+    pid = s.fields["plane_id"]
+    checked = 0
+    for p in s.truth["roof_planes"]:
+        m = pid == p["plane_id"]
+        if m.sum() < 10:
+            continue
+        P = np.column_stack([s.x[m], s.y[m], s.z[m]])
+        c = P.mean(0)
+        n = np.linalg.svd(P - c)[2][-1]
+        n = n if n[2] > 0 else -n
+        # the truth plane explains the points down to the range noise (0.03 m)...
+        resid = P @ np.asarray(p["normal"]) - p["offset"]
+        assert np.sqrt(np.mean(resid ** 2)) < 0.04, p
+        # ...and a plane fitted to them has the truth's normal (small dormer faces: few points, wider)
+        ang = np.degrees(np.arccos(np.clip(np.dot(n, p["normal"]), -1, 1)))
+        assert ang < (1.0 if m.sum() > 200 else 3.0), (p, ang)
+        assert np.dot(p["normal"], c) == pytest.approx(p["offset"], abs=0.05)
+        # and the plane's polygon holds its points
+        from shapely import contains_xy, wkt
+
+        poly = wkt.loads(p["polygon_wkt"]).buffer(0.01)
+        assert contains_xy(poly, s.x[m], s.y[m]).mean() > 0.999
+        checked += 1
+    assert checked >= 25
+
+
+def test_test_building_has_hip_roof_with_gable_dormer(corridor):
+    dormer = [b for b in corridor.truth["buildings"] if b["roof"] == "hip_dormer"]
+    assert len(dormer) == 1
+    faces = {p["face"]: p for p in corridor.truth["roof_planes"] if p["building_id"] == dormer[0]["id"]}
+    assert set(faces) == {"south", "north", "west", "east", "dormer_west", "dormer_east"}
+    # main faces face east and west (the method's test building), the hips north and south
+    assert abs(faces["south"]["normal"][0]) > 0.5 and abs(faces["west"]["normal"][1]) > 0.5
+    assert all(f["n_points"] > 10 for f in faces.values())
+
+
+def test_every_catenary_refits_from_its_points(corridor):
+    s = corridor
+    obj = s.fields["object_id"]
+    wire = s.fields["classification"] == 14
+    checked = 0
+    for span in s.truth["spans"]:
+        a, b = np.array(span["a"]), np.array(span["b"])
+        d = (b[:2] - a[:2]) / span["length_m"]
+        m = wire & (obj == span["wire_id"])
+        t = (s.x[m] - a[0]) * d[0] + (s.y[m] - a[1]) * d[1]
+        m_idx = np.flatnonzero(m)[(t >= 0) & (t <= span["length_m"])]
+        if len(m_idx) < 50:
+            continue
+        t = (s.x[m_idx] - a[0]) * d[0] + (s.y[m_idx] - a[1]) * d[1]
+        lateral = -(s.x[m_idx] - a[0]) * d[1] + (s.y[m_idx] - a[1]) * d[0]
+        assert np.abs(lateral).max() < 0.25  # within the footprint scatter
+        # least-squares catenary parameter: scan c, compare with the truth
+        cs = np.linspace(span["catenary_c_m"] * 0.7, span["catenary_c_m"] * 1.3, 121)
+        rms = [np.sqrt(np.mean((s.z[m_idx] - catenary_z(t, span["length_m"], a[2], b[2], c)) ** 2)) for c in cs]
+        best = cs[int(np.argmin(rms))]
+        assert best == pytest.approx(span["catenary_c_m"], rel=0.03)
+        assert min(rms) < 0.05
+        checked += 1
+    assert checked >= 20
+
+
+def test_crossings_lie_on_both_conductor_lines(corridor):
+    s = corridor
+    lines = s.truth["conductor_lines_2d"]
+    assert {l["line"] for l in lines} == {"A", "B"}
+    assert len(s.truth["crossings"]) == sum(l["line"] == "A" for l in lines) * sum(l["line"] == "B" for l in lines)
+    for c in s.truth["crossings"]:
+        for i in c["lines"]:
+            a, b = np.array(lines[i]["a"]), np.array(lines[i]["b"])
+            d = (b - a) / np.linalg.norm(b - a)
+            off = -(c["x"] - a[0]) * d[1] + (c["y"] - a[1]) * d[0]
+            assert abs(off) < 1e-6
+        assert 15 < c["angle_deg"] < 35  # a sharp crossing angle
+
+
+def test_bundles_and_stacked_conductors(corridor):
+    wires = [w for w in corridor.truth["wires"] if w["line"] == "A"]
+    offsets = sorted(w["offset_m"] for w in wires if w["kind"] == "phase")
+    # two sub-conductors 0.6 m apart per phase, two phases stacked per side
+    assert np.allclose(offsets, [-7.3, -7.3, -6.7, -6.7, 6.7, 6.7, 7.3, 7.3], atol=1e-6)
+    assert sum(w["kind"] == "earth" for w in wires) == 1
+    spans = corridor.truth["spans"]
+    assert all(1.0 < sp["sag_m"] < 6.0 for sp in spans if sp["line"] == "A")
+
+
+def test_truth_geopackage_layers(tmp_path):
+    import geopandas as gpd
+
+    toolbox.run("synthetic-scene", output=tmp_path / "c.laz", kind="corridor", density_ppm2=0.5, seed=1,
+                width_m=300, height_m=150)
+    from toolbox.io.vectors import read_vectors
+
+    layers = read_vectors(tmp_path / "c_truth.gpkg")
+    assert set(layers) == {"truth_conductors_2d", "truth_catenaries", "truth_crossings", "truth_roof_planes",
+                           "truth_buildings", "truth_pylons", "truth_trees", "truth_water"}
+    assert all(isinstance(g, gpd.GeoDataFrame) and g.crs.to_epsg() == 25832 for g in layers.values())
+    assert layers["truth_catenaries"].geometry.has_z.all()
+    assert len(layers["truth_crossings"]) > 0
