@@ -157,6 +157,10 @@ class Terrain:
         if self.steep is not None:
             vc, _, hw = self.steep
             bad |= np.abs(v - vc) <= 2.2 * hw + margin_m
+        if self.ridge is not None:  # buildings stand on levelled ground, not astride a ridge crest
+            u0, v0, u1, v1, _, hw = self.ridge
+            d, along, L = _line_frame(u, v, u0, v0, u1, v1)
+            bad |= (np.abs(d) <= hw + margin_m) & (along >= -margin_m) & (along <= L + margin_m)
         return bad
 
 
