@@ -154,9 +154,30 @@ def multiscale_opening(surface: np.ndarray, cell: float, max_size: float, k: flo
     return is_object & (best_dh > 0), best_dh, best_size
 
 
+class Sampler:
+    """Bilinear sampling of grids at fixed points (weights computed once, reused per surface)."""
+
+    def __init__(self, grid: Grid, x, y):
+        r, c = grid.fractional(x, y)
+        r = np.clip(r, 0, grid.rows - 1)
+        c = np.clip(c, 0, grid.cols - 1)
+        r0 = np.minimum(r.astype(np.int64), max(grid.rows - 2, 0))
+        c0 = np.minimum(c.astype(np.int64), max(grid.cols - 2, 0))
+        self.fr = (r - r0)
+        self.fc = (c - c0)
+        self.i00 = r0 * grid.cols + c0
+        self.dr = grid.cols if grid.rows > 1 else 0
+        self.dc = 1 if grid.cols > 1 else 0
+
+    def __call__(self, surface: np.ndarray) -> np.ndarray:
+        f = surface.ravel()
+        top = f[self.i00] * (1 - self.fc) + f[self.i00 + self.dc] * self.fc
+        bot = f[self.i00 + self.dr] * (1 - self.fc) + f[self.i00 + self.dr + self.dc] * self.fc
+        return top * (1 - self.fr) + bot * self.fr
+
+
 def bilinear(grid: Grid, surface: np.ndarray, x, y):
-    r, c = grid.fractional(x, y)
-    return ndimage.map_coordinates(surface, [r, c], order=1, mode="nearest")
+    return Sampler(grid, x, y)(surface)
 
 
 def surface_slope(surface: np.ndarray, cell: float) -> np.ndarray:
@@ -203,24 +224,25 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     if not keep.any():
         keep = occupied
     provisional = fill_holes(np.where(keep, zmin, np.nan), keep)
-    ground = _near_surface(grid, provisional, x, y, z, ground_threshold, slope_factor, low_outlier) & ~noise
+    sample = Sampler(grid, x, y)
+    ground, dz = _near_surface(sample, grid.cell, provisional, z, ground_threshold, slope_factor, low_outlier)
+    ground &= ~noise
     if refine and ground.sum() >= 3:
         # second pass: the surface fitted to the first pass's ground points (plane per cell)
         # follows the terrain between cell minima, so the same tolerance separates better
         refined, _ = dtm_from_ground(grid, x[ground], y[ground], z[ground])
-        ground = _near_surface(grid, refined, x, y, z, ground_threshold, slope_factor, low_outlier) & ~noise
+        ground, dz = _near_surface(sample, grid.cell, refined, z, ground_threshold, slope_factor, low_outlier)
+        ground &= ~noise
         provisional = refined
-    dz = z - bilinear(grid, provisional, x, y)
     noise |= dz < -2 * low_outlier
     return GroundResult(ground, noise, grid, provisional, is_object)
 
 
-def _near_surface(grid, surface, x, y, z, threshold, slope_factor, below):
+def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):
     """Points from ``below`` under to ``threshold + slope_factor * slope * cell`` over the surface."""
-    slope = surface_slope(surface, grid.cell)
-    tol = threshold + slope_factor * bilinear(grid, slope, x, y) * grid.cell
-    dz = z - bilinear(grid, surface, x, y)
-    return (dz <= tol) & (dz >= -below)
+    tol = threshold + slope_factor * sample(surface_slope(surface, cell)) * cell
+    dz = z - sample(surface)
+    return (dz <= tol) & (dz >= -below), dz
 
 
 def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):

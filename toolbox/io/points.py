@@ -325,21 +325,27 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
     if path.suffix.lower() not in LAS_EXTENSIONS:
         raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
     header = _header_for(pc)
-    las = laspy.LasData(header)
+    std = set(header.point_format.dimension_names)
+    extra = [laspy.ExtraBytesParams(name=n, type=_extra_type(v)) for n, v in pc.fields.items() if n not in std]
+    if extra:  # declared before the points exist, so the record array is allocated once
+        header.add_extra_dims(extra)
+    las = laspy.LasData(header, points=laspy.ScaleAwarePointRecord.zeros(len(pc), header=header))
     las.x, las.y, las.z = pc.x, pc.y, pc.z
-    std = set(las.point_format.dimension_names)
     for name, values in pc.fields.items():
-        if name in std:
-            las[name] = values
-        else:
-            las.add_extra_dim(laspy.ExtraBytesParams(name=name, type=_extra_type(values)))
-            las[name] = values
+        las[name] = values
     if len(pc):
         header.mins = [pc.x.min(), pc.y.min(), pc.z.min()]
         header.maxs = [pc.x.max(), pc.y.max(), pc.z.max()]
     with atomic_path(path, overwrite) as tmp:
-        las.write(tmp, laz_backend=laspy.LazBackend.Lazrs if path.suffix.lower() == ".laz" else None)
+        las.write(tmp, laz_backend=_laz_backend() if path.suffix.lower() == ".laz" else None)
     return path
+
+
+def _laz_backend():
+    """lazrs, compressing chunks on all cores when the parallel build is there."""
+    import laspy
+
+    return laspy.LazBackend.LazrsParallel if laspy.LazBackend.LazrsParallel.is_available() else laspy.LazBackend.Lazrs
 
 
 def _extra_type(values: np.ndarray):

@@ -1,0 +1,96 @@
+"""Buildings against vegetation among the non-ground points, and vegetation by height class
+(the gLiDAR method's object classification, METHODS.md §2). Pure numpy/scipy.
+
+* Local least-squares plane per point over its ``neighbours`` nearest non-ground points; the
+  plane error is the RMS distance to it. Linear sets (wires, edges seen end-on) fit a plane
+  trivially, so planarity also asks for a two-dimensional spread.
+* Planar points grouped by proximity; groups of at least ``min_building_points`` points standing
+  at least ``min_building_height`` above the terrain are buildings. Non-planar points between
+  them (ridges, eaves, chimneys) join a building when most of their neighbours are building.
+* The rest is vegetation (plane error ≥ ``min_plane_error``) clustered by proximity; each cluster
+  gets one class by its height above the terrain: 3 low (< 2 m), 4 medium (< 5 m), 5 high.
+  Points that fit neither rule stay 1 (unclassified), as the method's "unknown".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+GROUND, UNCLASSIFIED, LOW, MEDIUM, HIGH, BUILDING, NOISE = 2, 1, 3, 4, 5, 6, 7
+
+
+def local_planes(xyz: np.ndarray, neighbours: int):
+    """Per point: RMS plane error of its neighbourhood, 2D spread (second eigenvalue share),
+    and the neighbour indices. Eigen-decomposition of each neighbourhood's covariance."""
+    tree = cKDTree(xyz)
+    k = int(min(neighbours, len(xyz)))
+    _, idx = tree.query(xyz, k=k, workers=-1)
+    idx = idx.reshape(len(xyz), k)
+    nb = xyz[idx]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centred, centred) / k
+    ev = np.linalg.eigvalsh(cov)  # ascending
+    plane_error = np.sqrt(np.maximum(ev[:, 0], 0))
+    total = ev.sum(axis=1) + 1e-12
+    spread2d = ev[:, 1] / total  # ~0 for a line, up to 0.5 for a flat patch
+    return plane_error, spread2d, idx, tree
+
+
+def _components(xyz: np.ndarray, radius: float):
+    tree = cKDTree(xyz)
+    pairs = tree.query_pairs(radius, output_type="ndarray")
+    n = len(xyz)
+    g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
+        sparse.coo_matrix((n, n))
+    return connected_components(g, directed=False)[1]
+
+
+def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 12, max_plane_error: float = 0.08,
+                     min_plane_error: float = 0.12, min_building_points: int = 60, min_building_height: float = 2.0,
+                     link_distance: float = 1.5, vegetation_link: float = 1.5, low_max: float = 2.0,
+                     medium_max: float = 5.0, min_object_height: float = 0.25) -> np.ndarray:
+    """ASPRS classes (1, 3, 4, 5, 6) for non-ground points ``xyz`` with heights above the terrain
+    ``height`` (same units). Lengths are in the cloud's units."""
+    n = len(xyz)
+    out = np.full(n, UNCLASSIFIED, np.uint8)
+    if n == 0:
+        return out
+    above = height >= min_object_height
+    cls_above = np.full(int(above.sum()), UNCLASSIFIED, np.uint8)
+    pts = xyz[above]
+    h = height[above]
+    if len(pts) >= 4:
+        err, spread, idx, _ = local_planes(pts, neighbours)
+        planar = (err <= max_plane_error) & (spread >= 0.05)
+        building = np.zeros(len(pts), bool)
+        if planar.any():
+            p_idx = np.flatnonzero(planar)
+            lab = _components(pts[p_idx], link_distance)
+            counts = np.bincount(lab)
+            hmax = np.zeros(len(counts))
+            np.maximum.at(hmax, lab, h[p_idx])
+            ok = (counts[lab] >= min_building_points) & (hmax[lab] >= min_building_height)
+            building[p_idx[ok]] = True
+            # ridges, eaves, small roof structures: most neighbours are building
+            for _ in range(2):
+                share = building[idx].mean(axis=1)
+                grow = ~building & (share >= 0.5) & (err < 3 * min_plane_error)
+                if not grow.any():
+                    break
+                building |= grow
+        cls_above[building] = BUILDING
+        veg = ~building & ((err >= min_plane_error) | ~planar)
+        if veg.any():
+            v_idx = np.flatnonzero(veg)
+            lab = _components(pts[v_idx], vegetation_link)
+            top = np.zeros(lab.max() + 1)
+            np.maximum.at(top, lab, h[v_idx])
+            ch = top[lab]
+            cls_above[v_idx] = np.where(ch < low_max, LOW, np.where(ch < medium_max, MEDIUM, HIGH))
+    out[above] = cls_above
+    # barely raised points (grass, kerbs) that are not ground: low vegetation by the height rule
+    out[~above & (height > 0)] = LOW
+    return out

@@ -1,0 +1,262 @@
+"""Adapter of the morphological DTM plugin: algorithms ``dtm``, ``hillshade`` and ``classify``
+(parameters, inputs, outputs). The computing lives in ``core`` and ``objects``."""
+
+from __future__ import annotations
+
+import toolbox
+from toolbox import Algorithm, DataError, Input, Output, Parameter, UsageError
+
+REFERENCE = ("Mongus & Žalik (2014) IEEE JSTARS 7(1) 340-351; Mongus, Lukač & Žalik (2014) ISPRS J. 93, 145-156; "
+             "Mongus & Horvat, gLiDAR, Geodetski vestnik (METHODS.md §2)")
+MAX_CELLS = 400_000_000
+
+GROUND_PARAMETERS = [
+    Parameter("filter_cell_m", float, 2.0, "cell of the minimum surface the multi-scale filter works on "
+              "(about 2 points per cell or more)", unit="m", minimum=0.1, maximum=50.0),
+    Parameter("max_filter_size_m", float, 50.0, "largest object to remove (its width); larger flattens "
+              "ridges in steep terrain and costs time", unit="m", minimum=1.0, maximum=1000.0),
+    Parameter("slope_k", float, 0.08, "k: growth of the removal threshold with object size (Δh ≥ n + k·size)",
+              unit="m/m", minimum=0.0, maximum=5.0),
+    Parameter("min_height_n_m", float, 0.45, "n: smallest height difference that removes an object",
+              unit="m", minimum=0.0, maximum=50.0),
+    Parameter("ground_threshold_m", float, 0.25, "largest height of a ground point over the filtered "
+              "surface on flat terrain", unit="m", minimum=0.0, maximum=10.0),
+    Parameter("slope_factor", float, 1.0, "extra tolerance per unit of terrain slope (x cell size)",
+              minimum=0.0, maximum=10.0),
+    Parameter("low_outlier_m", float, 2.0, "points this far below their neighbourhood are noise (class 7)",
+              unit="m", minimum=0.1, maximum=100.0),
+]
+
+
+def _ground(pc, p):
+    """Run the ground filter with the parameters converted to the cloud's units."""
+    from .core import Grid, ground_filter
+
+    pc.require_points("the ground filter", 10)
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    cell = p["filter_cell_m"] / hu
+    _check_grid(pc, cell, "filter_cell_m")
+    return ground_filter(
+        pc.x, pc.y, pc.z, cell=cell, max_size=p["max_filter_size_m"] / hu,
+        k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
+        slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu,
+    ), Grid
+
+
+def _check_grid(pc, cell, name):
+    w, s, e, n = pc.bounds()
+    cells = ((e - w) / cell + 3) * ((n - s) / cell + 3)
+    if cells > MAX_CELLS:
+        raise UsageError(f"{name}: a {cell * pc.horizontal_unit_m:g} m grid over {pc.source!r} would have "
+                         f"{cells / 1e6:.0f} million cells (limit {MAX_CELLS / 1e6:.0f} million); use a larger {name} "
+                         "or tile the input")
+
+
+def _footprint(grid, x, y, radius_cells):
+    """Cells inside the data's footprint (holes of buildings and water included)."""
+    import numpy as np
+    from scipy import ndimage
+
+    occ = np.zeros((grid.rows, grid.cols), bool)
+    r, c = grid.index(x, y)
+    occ[r, c] = True
+    closed = ndimage.binary_closing(np.pad(occ, radius_cells), iterations=radius_cells)[
+        radius_cells:-radius_cells or None, radius_cells:-radius_cells or None]
+    return ndimage.binary_fill_holes(closed | occ)
+
+
+def _dtm_raster(pc, ground_mask, resolution_m):
+    import numpy as np
+    from affine import Affine
+
+    from toolbox.io.rasters import Raster
+
+    from .core import Grid, dtm_from_ground
+
+    res = resolution_m / pc.horizontal_unit_m
+    _check_grid(pc, res, "resolution_m")
+    grid = Grid.around(pc.x, pc.y, res, pad_cells=0)
+    g = ground_mask
+    if g.sum() < 3:
+        raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
+    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g])
+    inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
+    dtm = np.where(inside, dtm, np.nan).astype(np.float32)
+    return Raster(dtm, Affine(grid.cell, 0, grid.west, 0, -grid.cell, grid.north), crs=pc.crs,
+                  nodata=float("nan"), style="dtm", description="bare-earth DTM (morphological filter)"), grid
+
+
+def _preview(dtm_raster, pc, ground, noise):
+    """Hillshade of the DTM with the points to be removed drawn over it (objects red, noise blue)."""
+    import numpy as np
+
+    from .core import Grid, hillshade
+
+    t = dtm_raster.transform
+    hs = hillshade(dtm_raster.data, t.a, t.e).astype(np.float32)
+    rgb = np.repeat(hs[..., None], 3, axis=2)
+    grid = Grid(t.c, t.f, t.a, *dtm_raster.data.shape)
+    r, c = grid.index(pc.x, pc.y)
+    for mask, colour in ((~ground & ~noise, (230, 40, 40)), (noise, (30, 90, 255))):
+        cover = np.zeros(hs.shape, bool)
+        cover[r[mask], c[mask]] = True
+        rgb[cover] = 0.35 * rgb[cover] + 0.65 * np.array(colour, np.float32)
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+def _run_dtm(inputs, params, ctx):
+    import time
+
+    import numpy as np
+
+    pc = inputs["points"]
+    t0 = time.perf_counter()
+    gr, _ = _ground(pc, params)
+    t1 = time.perf_counter()
+    dtm, _ = _dtm_raster(pc, gr.ground, params["resolution_m"])
+    t2 = time.perf_counter()
+    cls = np.ones(len(pc), np.uint8)
+    cls[gr.ground] = 2
+    cls[gr.noise] = 7
+    out = {"dtm": dtm, "classified": pc.with_fields(classification=cls)}
+    if ctx.wants("preview"):
+        out["preview"] = _preview(dtm, pc, gr.ground, gr.noise)
+    stats = {"n_points": len(pc), "n_ground": int(gr.ground.sum()), "n_noise": int(gr.noise.sum()),
+             "ground_share": round(float(gr.ground.mean()), 4), "filter_s": round(t1 - t0, 3),
+             "dtm_s": round(t2 - t1, 3)}
+    if "label" in pc.fields:  # ISPRS filter-test reference labels: 0 bare earth, 1 object
+        from .evaluation import ground_errors
+
+        stats.update({f"isprs_{k}": v for k, v in ground_errors(pc.fields["label"] == 0, gr.ground).items()})
+    return toolbox.Result(outputs=out, stats=stats)
+
+
+def _run_hillshade(inputs, params, ctx):
+    from toolbox.io.rasters import Raster
+
+    from .core import hillshade
+
+    dem = inputs["dem"]
+    t = dem.transform
+    if t.b != 0 or t.d != 0:
+        raise DataError(f"input {dem.source!r} is rotated; warp it to a north-up grid first (gdalwarp)")
+    hs = hillshade(dem.bands()[0], t.a, t.e, params["azimuth_deg"], params["altitude_deg"], params["z_factor"],
+                   params["scale"], params["multidirectional"], ~dem.valid_mask(), params["compute_edges"])
+    return {"hillshade": Raster(hs, t, crs=dem.crs, nodata=0, style="hillshade", description="hillshade")}
+
+
+def _run_classify(inputs, params, ctx):
+    import numpy as np
+
+    from .core import bilinear, Grid
+    from .objects import classify_objects
+
+    pc = inputs["points"]
+    pc.require_points("classify", 10)
+    if params["ground"] == "file":
+        cls0 = pc.classification
+        if cls0 is None or not np.any(cls0 == 2):
+            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
+        ground, noise = cls0 == 2, cls0 == 7
+    else:
+        gp = {p.name: params[p.name] for p in GROUND_PARAMETERS}
+        gr, _ = _ground(pc, gp)
+        ground, noise = gr.ground, gr.noise
+    dtm, grid = _dtm_raster(pc, ground, params["resolution_m"])
+    surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
+    h = pc.z - bilinear(grid, surface, pc.x, pc.y)
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    cls = np.ones(len(pc), np.uint8)
+    cls[ground] = 2
+    rest = ~ground & ~noise
+    xyz = np.column_stack([pc.x[rest], pc.y[rest], pc.z[rest] * vu / hu])  # isotropic units for the fits
+    cls[rest] = classify_objects(
+        xyz, h[rest] * vu / hu, neighbours=params["neighbours"], max_plane_error=params["max_plane_error_m"] / hu,
+        min_plane_error=params["min_plane_error_m"] / hu, min_building_points=params["min_building_points"],
+        min_building_height=params["min_building_height_m"] / hu, link_distance=params["link_distance_m"] / hu,
+        vegetation_link=params["link_distance_m"] / hu)
+    below = rest & (h < -params["low_outlier_m"] / vu)
+    cls[noise | below] = 7
+    u, c = np.unique(cls, return_counts=True)
+    return toolbox.Result(outputs={"classified": pc.with_fields(classification=cls), "dtm": dtm},
+                          stats={"classes": {int(a): int(b) for a, b in zip(u, c)}})
+
+
+@toolbox.hookimpl
+def toolbox_algorithms():
+    resolution = Parameter("resolution_m", float, 1.0, "DTM cell size (0.5 m and 1 m are standard; bounded by "
+                           "point density)", unit="m", minimum=0.05, maximum=1000.0)
+    return [
+        Algorithm(
+            id="dtm", title="Morphological DTM and ground classification", run=_run_dtm,
+            description=(
+                "Ground filter by multi-scale morphological opening: openings of growing size up to the largest "
+                "object; at each cell the scale with the largest height drop is the object's size, and it is "
+                "removed when Δh ≥ n + k·size. Ground points (within a slope-aware tolerance of the filtered "
+                "surface) make the DTM: a plane fitted per cell, holes under buildings and water filled by "
+                "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
+                "Several input files, or a folder, run as a batch in parallel."),
+            reference=REFERENCE,
+            parameters=[resolution, *GROUND_PARAMETERS],
+            inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud")],
+            outputs=[
+                Output("dtm", "raster", "bare-earth DTM", style="dtm"),
+                Output("classified", "points", "the input with classification 2 (ground), 7 (noise), 1 (other)",
+                       suffix="_classified"),
+                Output("preview", "image", "hillshade with the removed points in red and noise in blue "
+                       "(the view to tune parameters with)", optional=True),
+            ],
+        ),
+        Algorithm(
+            id="hillshade", title="Hillshade (gdaldem compatible)", run=_run_hillshade,
+            description=("Analytical hillshade of a DEM with gdaldem's Horn-gradient formulas: one light "
+                         "(azimuth, altitude) or the multidirectional blend of four. 1..255, 0 = nodata."),
+            reference="Horn (1981), Hill shading and the reflectance map, Proc. IEEE 69(1); GDAL gdaldem; "
+                      "Mark (1992) USGS OF 92-422 (multidirectional)",
+            parameters=[
+                Parameter("azimuth_deg", float, 315.0, "direction the light comes from, clockwise from north",
+                          unit="deg", minimum=0.0, maximum=360.0),
+                Parameter("altitude_deg", float, 45.0, "height of the light above the horizon", unit="deg",
+                          minimum=0.0, maximum=90.0),
+                Parameter("z_factor", float, 1.0, "vertical exaggeration", minimum=0.0, exclusive_minimum=True,
+                          maximum=1000.0),
+                Parameter("scale", float, 1.0, "ratio of horizontal to vertical units (111120 for degrees and metres)",
+                          minimum=0.0, exclusive_minimum=True, maximum=1e7),
+                Parameter("multidirectional", bool, False, "blend lights from 225, 270, 315 and 360 degrees"),
+                Parameter("compute_edges", bool, True, "shade the border cells too (gdaldem -compute_edges)"),
+            ],
+            inputs=[Input("dem", "raster", "elevation GeoTIFF")],
+            outputs=[Output("hillshade", "raster", "hillshade, uint8", style="hillshade")],
+        ),
+        Algorithm(
+            id="classify", title="Ground, buildings, vegetation (low/medium/high), noise", run=_run_classify,
+            description=(
+                "Among the non-ground points, local least-squares planes separate buildings (small plane error, "
+                "large connected planar sets) from vegetation; vegetation clusters are classed low (< 2 m), "
+                "medium (< 5 m) or high by their height above the terrain; points below the terrain are noise. "
+                "ASPRS classes 1, 2, 3, 4, 5, 6, 7."),
+            reference=REFERENCE,
+            parameters=[
+                resolution,
+                Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or the "
+                          "file's own class 2", choices=("filter", "file")),
+                *GROUND_PARAMETERS,
+                Parameter("neighbours", int, 12, "points in each local plane fit", minimum=4, maximum=200),
+                Parameter("max_plane_error_m", float, 0.08, "largest RMS plane error of a building point",
+                          unit="m", minimum=0.0, maximum=5.0),
+                Parameter("min_plane_error_m", float, 0.12, "smallest RMS plane error of a vegetation point",
+                          unit="m", minimum=0.0, maximum=5.0),
+                Parameter("min_building_points", int, 60, "smallest planar set that is a building",
+                          unit="points", minimum=3),
+                Parameter("min_building_height_m", float, 2.0, "lowest building top above the terrain",
+                          unit="m", minimum=0.0, maximum=500.0),
+                Parameter("link_distance_m", float, 1.5, "points closer than this belong to one set",
+                          unit="m", minimum=0.01, maximum=50.0),
+            ],
+            inputs=[Input("points", "points", "LAS/LAZ point cloud")],
+            outputs=[
+                Output("classified", "points", "the input with ASPRS classes 1-7"),
+                Output("dtm", "raster", "the DTM used for heights above ground", style="dtm"),
+            ],
+        ),
+    ]
