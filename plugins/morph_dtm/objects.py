@@ -5,7 +5,8 @@
   plane error is the RMS distance to it. Linear sets (wires, edges seen end-on) fit a plane
   trivially, so planarity also asks for a two-dimensional spread.
 * Planar points grouped by proximity; groups of at least ``min_building_points`` points standing
-  at least ``min_building_height`` above the terrain are buildings. Non-planar points between
+  at least ``min_building_height`` above the terrain, holding most (``min_planar_share``) of the
+  raised points in the cells they cover, are buildings. Non-planar points between
   them (ridges, eaves, chimneys) join a building when most of their neighbours are building.
 * The rest is vegetation (plane error ≥ ``min_plane_error``) clustered by proximity; each cluster
   gets one class by its height above the terrain: 3 low (< 2 m), 4 medium (< 5 m), 5 high.
@@ -39,6 +40,12 @@ def local_planes(xyz: np.ndarray, neighbours: int):
     return plane_error, spread2d, idx, tree
 
 
+def _cell_keys(xyz: np.ndarray, cell: float) -> np.ndarray:
+    ij = np.floor(xyz[:, :2] / cell).astype(np.int64)
+    ij -= ij.min(axis=0)
+    return ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+
+
 def _components(xyz: np.ndarray, radius: float):
     tree = cKDTree(xyz)
     pairs = tree.query_pairs(radius, output_type="ndarray")
@@ -51,7 +58,8 @@ def _components(xyz: np.ndarray, radius: float):
 def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 12, max_plane_error: float = 0.08,
                      min_plane_error: float = 0.12, min_building_points: int = 60, min_building_height: float = 2.0,
                      link_distance: float = 1.5, vegetation_link: float = 1.5, low_max: float = 2.0,
-                     medium_max: float = 5.0, min_object_height: float = 0.25) -> np.ndarray:
+                     medium_max: float = 5.0, min_object_height: float = 0.25,
+                     min_planar_share: float = 0.6, grow_steps: int = 8) -> np.ndarray:
     """ASPRS classes (1, 3, 4, 5, 6) for non-ground points ``xyz`` with heights above the terrain
     ``height`` (same units). Lengths are in the cloud's units."""
     n = len(xyz)
@@ -72,24 +80,43 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
             counts = np.bincount(lab)
             hmax = np.zeros(len(counts))
             np.maximum.at(hmax, lab, h[p_idx])
-            ok = (counts[lab] >= min_building_points) & (hmax[lab] >= min_building_height)
+            # a roof is a planar set that dominates the cells it covers; chance-planar patches on
+            # crown tops share their cells with the crown's many other returns
+            cell = link_distance
+            key_all = _cell_keys(pts, cell)
+            uniq, inv_all = np.unique(key_all, return_inverse=True)
+            all_count = np.bincount(inv_all)
+            comp_cell = lab.astype(np.int64) * len(uniq) + inv_all[p_idx]
+            cu, cinv, ccount = np.unique(comp_cell, return_inverse=True, return_counts=True)
+            cell_of = cu % len(uniq)
+            share_cells = ccount / all_count[cell_of]
+            comp_of = cu // len(uniq)
+            share = np.bincount(comp_of, weights=share_cells * ccount, minlength=len(counts)) / np.maximum(counts, 1)
+            ok = (counts[lab] >= min_building_points) & (hmax[lab] >= min_building_height) & \
+                (share[lab] >= min_planar_share)
             building[p_idx[ok]] = True
             # ridges, eaves, small roof structures: most neighbours are building
-            for _ in range(2):
+            for _ in range(grow_steps):
                 share = building[idx].mean(axis=1)
-                grow = ~building & (share >= 0.5) & (err < 3 * min_plane_error)
+                grow = ~building & (share >= 0.5)
                 if not grow.any():
                     break
                 building |= grow
         cls_above[building] = BUILDING
-        veg = ~building & ((err >= min_plane_error) | ~planar)
-        if veg.any():
-            v_idx = np.flatnonzero(veg)
+        rough = (err >= min_plane_error) | ~planar
+        rest = ~building
+        if rest.any():
+            # clusters of the remaining points; a cluster with a fair share of rough (non-planar)
+            # points is a plant, all of it, classed by its top; others stay unknown (1)
+            v_idx = np.flatnonzero(rest)
             lab = _components(pts[v_idx], vegetation_link)
             top = np.zeros(lab.max() + 1)
             np.maximum.at(top, lab, h[v_idx])
+            rough_share = np.bincount(lab, weights=rough[v_idx]) / np.bincount(lab)
+            is_veg = rough_share[lab] >= 0.3
             ch = top[lab]
-            cls_above[v_idx] = np.where(ch < low_max, LOW, np.where(ch < medium_max, MEDIUM, HIGH))
+            cls_v = np.where(ch < low_max, LOW, np.where(ch < medium_max, MEDIUM, HIGH))
+            cls_above[v_idx[is_veg]] = cls_v[is_veg]
     out[above] = cls_above
     # barely raised points (grass, kerbs) that are not ground: low vegetation by the height rule
     out[~above & (height > 0)] = LOW
