@@ -317,6 +317,15 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
     support = (good & (own | (n_ >= 6))) | own_good
     mean_own = np.where(own, S["z"] / np.maximum(S["n"], 1), np.nan)
     value = np.where(own_good, a0, np.where(support, a, np.where(own, mean_own, np.nan)))
+    # a fit evaluated at the centre of a cell whose points sit to one side may extrapolate: keep
+    # it within the heights of the points around the cell
+    zlo = np.full(N, np.inf)
+    zhi = np.full(N, -np.inf)
+    np.minimum.at(zlo, flat, z)
+    np.maximum.at(zhi, flat, z)
+    zlo = ndimage.minimum_filter(zlo.reshape(shape), 3, mode="constant", cval=np.inf)
+    zhi = ndimage.maximum_filter(zhi.reshape(shape), 3, mode="constant", cval=-np.inf)
+    value = np.where(np.isfinite(value), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
     return fill_holes(value, known), known
 

@@ -43,13 +43,35 @@ def _ground(pc, p):
     ), Grid
 
 
+BYTES_PER_CELL = 320  # the DTM fit holds about 40 float64 grids at once
+
+
+def _max_cells() -> int:
+    """Grids may take half of the machine's memory."""
+    import os
+
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        total = 8 << 30
+    return int(min(MAX_CELLS, 0.5 * total / BYTES_PER_CELL))
+
+
 def _check_grid(pc, cell, name):
     w, s, e, n = pc.bounds()
     cells = ((e - w) / cell + 3) * ((n - s) / cell + 3)
-    if cells > MAX_CELLS:
+    limit = _max_cells()
+    if cells > limit:
         raise UsageError(f"{name}: a {cell * pc.horizontal_unit_m:g} m grid over {pc.source!r} would have "
-                         f"{cells / 1e6:.0f} million cells (limit {MAX_CELLS / 1e6:.0f} million); use a larger {name} "
-                         "or tile the input")
+                         f"{cells / 1e6:.0f} million cells, about {cells * BYTES_PER_CELL / 2**30:.0f} GiB "
+                         f"(limit here {limit / 1e6:.0f} million); use a larger {name} or tile the input")
+
+
+def _check_grids(pc, params):
+    """Refuse grids too big for memory before any work starts."""
+    pc.require_points("the ground filter", 10)
+    _check_grid(pc, params["filter_cell_m"] / pc.horizontal_unit_m, "filter_cell_m")
+    _check_grid(pc, params["resolution_m"] / pc.horizontal_unit_m, "resolution_m")
 
 
 def _footprint(grid, x, y, radius_cells):
@@ -110,6 +132,7 @@ def _run_dtm(inputs, params, ctx):
     import numpy as np
 
     pc = inputs["points"]
+    _check_grids(pc, params)
     t0 = time.perf_counter()
     gr, _ = _ground(pc, params)
     t1 = time.perf_counter()
@@ -152,7 +175,7 @@ def _run_classify(inputs, params, ctx):
     from .objects import classify_objects
 
     pc = inputs["points"]
-    pc.require_points("classify", 10)
+    _check_grids(pc, params)
     if params["ground"] == "file":
         cls0 = pc.classification
         if cls0 is None or not np.any(cls0 == 2):

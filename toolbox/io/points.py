@@ -371,12 +371,13 @@ def _header_for(pc: PointCloud):
         header = laspy.LasHeader(version=version, point_format=fmt_id)
         header.scales = src.scales
         header.offsets = src.offsets
-        # keep the source's VLRs; CRS VLRs are rewritten from pc.crs (which --crs may override)
-        drop = {"ExtraBytesVlr"} | (_CRS_VLRS if pc.crs is not None else set())
+        # keep the source's VLRs; CRS VLRs are rewritten only when the CRS changed (--crs)
+        rewrite = pc.crs is not None and not _same_crs(_safe_parse_crs(src), pc.crs)
+        drop = {"ExtraBytesVlr"} | (_CRS_VLRS if rewrite else set())
         for vlr in src.vlrs:
             if type(vlr).__name__ not in drop:
                 header.vlrs.append(vlr)
-        if pc.crs is not None:
+        if rewrite:
             _add_crs(header, pc.crs)
         header.system_identifier = src.system_identifier
         header.generating_software = "lidar-toolbox"
@@ -393,8 +394,23 @@ def _header_for(pc: PointCloud):
     return header
 
 
+def _same_crs(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    try:
+        return a == b or a.to_wkt() == b.to_wkt()
+    except Exception:
+        return False
+
+
 def _add_crs(header, crs) -> None:
+    import laspy
+
     try:
         header.add_crs(crs)
-    except Exception as exc:
-        log.warning("could not store CRS %s in the LAS header: %s", getattr(crs, "name", crs), exc)
+        return
+    except Exception as exc:  # laspy only writes CRSs with an EPSG code: write the WKT ourselves
+        log.debug("laspy add_crs failed (%s); writing a WKT VLR", exc)
+    header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(crs.to_wkt()))
+    if header.version.minor >= 4:
+        header.global_encoding.wkt = True

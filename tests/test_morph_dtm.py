@@ -1,0 +1,249 @@
+"""Morphological DTM plugin: ground filter and DTM accuracy against exact truth (synthetic) and
+reference labels (ISPRS), hillshade against gdaldem's formula on closed-form surfaces, object
+classes, batch and preview."""
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+
+import toolbox
+from conftest import shared_file
+from toolbox.io.points import read_points
+from toolbox.io.rasters import Raster, read_raster, write_raster
+from toolbox.registry import registry
+from toolbox_plugins.morph_dtm import core
+from toolbox_plugins.morph_dtm.evaluation import ground_errors
+
+
+@pytest.fixture(scope="module")
+def terrain_scene(tmp_path_factory):
+    d = tmp_path_factory.mktemp("terrain")
+    toolbox.run("synthetic-scene", output=d / "t.laz", kind="terrain", seed=21)
+    return d / "t.laz"
+
+
+def test_ground_and_dtm_accuracy_on_synthetic_truth(terrain_scene, tmp_path):
+    rep = toolbox.run("dtm", terrain_scene, tmp_path / "dtm.tif")
+    truth = laspy.read(terrain_scene).classification
+    pred = laspy.read(tmp_path / "dtm_classified.laz").classification
+    e = ground_errors(truth == 2, pred == 2)
+    assert e["total_pct"] <= 1.0, e  # issue target: ground total error <= 1 %
+    assert e["kappa"] >= 0.97
+    # the DTM against the true DTM, cell for cell (same 1 m grid)
+    dtm = read_raster(tmp_path / "dtm.tif")
+    ref = read_raster(str(terrain_scene).replace(".laz", "_dtm.tif"))
+    assert dtm.transform == ref.transform and dtm.shape == ref.shape
+    d = dtm.data.astype(float) - ref.data
+    assert np.isfinite(d).all()
+    rmse = float(np.sqrt(np.mean(d ** 2)))
+    assert rmse <= 0.08, rmse  # the method's published figure, over all cells (slopes, embankment, holes)
+    assert rep["stats"]["n_noise"] >= 3  # the scene's low outliers
+
+
+def test_low_outliers_become_noise(terrain_scene, tmp_path):
+    toolbox.run("dtm", terrain_scene, tmp_path / "d.tif")
+    truth = laspy.read(terrain_scene)
+    pred = laspy.read(tmp_path / "d_classified.laz").classification
+    ref = read_raster(str(terrain_scene).replace(".laz", "_dtm.tif"))
+    col = ((np.asarray(truth.x) - ref.transform.c) / ref.cell_size).astype(int)
+    row = ((ref.transform.f - np.asarray(truth.y)) / ref.cell_size).astype(int)
+    depth = ref.data[row.clip(0, ref.shape[0] - 1), col.clip(0, ref.shape[1] - 1)] - np.asarray(truth.z)
+    low = (truth.classification == 7) & (depth > 2.5)  # clearly below the 2 m outlier threshold
+    assert low.sum() >= 20
+    assert (pred[low] == 7).mean() >= 0.95
+    assert not np.any(pred[truth.classification == 7] == 2) or (pred[low] == 2).sum() == 0
+
+
+@pytest.mark.parametrize("sample, limit", [("samp11", 10.0), ("samp12", 3.0)])
+def test_isprs_reference_samples_with_default_parameters(sample, limit, tmp_path):
+    path = shared_file(f"isprs_filtertest/{sample}.txt")
+    rep = toolbox.run("dtm", path, tmp_path / "d.tif", crs="EPSG:32632")
+    s = rep["stats"]
+    assert s["isprs_total_pct"] <= limit, s
+    assert s["isprs_kappa"] >= 0.8
+
+
+def test_ground_errors_definitions():
+    t = np.array([1, 1, 1, 1, 0, 0, 0, 0, 0, 0], bool)
+    p = np.array([1, 1, 1, 0, 1, 0, 0, 0, 0, 0], bool)
+    e = ground_errors(t, p)
+    assert e["type1_pct"] == 25.0 and e["type2_pct"] == pytest.approx(100 / 6, abs=1e-3)
+    assert e["total_pct"] == 20.0
+    assert e["kappa"] == pytest.approx((0.8 - 0.52) / 0.48, abs=1e-4)
+
+
+def test_fill_holes_is_exact_on_planes_and_smooth():
+    yy, xx = np.mgrid[0:40, 0:50].astype(float)
+    plane = 3.0 + 0.2 * xx - 0.1 * yy
+    holes = plane.copy()
+    holes[10:25, 5:30] = np.nan
+    holes[0:3, 45:50] = np.nan  # touching the edge
+    filled = core.fill_holes(holes)
+    np.testing.assert_allclose(filled[10:25, 5:30], plane[10:25, 5:30], atol=1e-6)
+    assert np.isfinite(filled).all()
+
+
+def test_dtm_from_ground_is_unbiased_on_a_steep_plane():
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 50, 40000)
+    y = rng.uniform(0, 50, 40000)
+    z = 100 + 0.9 * x - 0.4 * y  # 44 degrees
+    grid = core.Grid(0.0, 50.0, 1.0, 50, 50)
+    dtm, support = core.dtm_from_ground(grid, x, y, z)
+    xs, ys = grid.centres()
+    truth = 100 + 0.9 * xs[None, :] - 0.4 * ys[:, None]
+    assert support.all()
+    np.testing.assert_allclose(dtm, truth, atol=1e-6)
+
+
+def test_multiscale_opening_removes_by_size_and_height():
+    surf = np.zeros((100, 100))
+    surf[20:30, 20:30] = 5.0  # a 10 m building, 5 m high: removed
+    surf[60:62, 60:62] = 0.3  # a 2 m bump of 0.3 m: kept (below n)
+    yy, xx = np.mgrid[0:100, 0:100]
+    ridge = np.clip(3 - np.abs(xx - 80) * 0.3, 0, None)  # a broad ridge: kept
+    obj, dh, size = core.multiscale_opening(surf + ridge, 1.0, 30.0, k=0.08, n=0.45)
+    assert obj[20:30, 20:30].all()
+    assert not obj[60:62, 60:62].any()
+    assert not obj[:, 75:86].any()
+    assert np.allclose(dh[22:28, 22:28], 5.0, atol=1e-9) and np.all(size[22:28, 22:28] == 11.0)
+
+
+def _hillshade_closed_form(p, q, az, alt, z=1.0):
+    """gdaldem's shade of the plane z = p*E + q*N: 1 + 254 * max(0, n . L)."""
+    a, al = np.radians(az), np.radians(alt)
+    cang = (np.sin(al) - z * np.cos(al) * (p * np.sin(a) + q * np.cos(a))) / np.sqrt(1 + z * z * (p * p + q * q))
+    return np.floor(1 + 254 * max(cang, 0.0) + 0.5) if cang > 0 else 1.0
+
+
+@pytest.mark.parametrize("p, q", [(0.0, 0.0), (0.5, 0.0), (0.0, -0.7), (0.3, 0.4), (-1.2, 0.8), (2.0, 2.0)])
+@pytest.mark.parametrize("az, alt", [(315, 45), (90, 30), (200, 60)])
+def test_hillshade_matches_gdaldem_formula_on_planes(p, q, az, alt):
+    res = 2.0
+    rows, cols = 20, 30
+    E = (np.arange(cols) + 0.5) * res
+    N = 1000 - (np.arange(rows) + 0.5) * res
+    dem = p * E[None, :] + q * N[:, None]
+    hs = core.hillshade(dem, res, -res, az, alt)
+    want = _hillshade_closed_form(p, q, az, alt)
+    assert np.all(np.abs(hs[1:-1, 1:-1].astype(int) - want) <= 1)
+    # edges are computed too (-compute_edges: missing neighbours take the centre's value)
+    assert hs[0].min() >= 1 and hs[:, -1].min() >= 1
+    hs2 = core.hillshade(dem, res, -res, az, alt, z_factor=2.0)
+    assert abs(int(hs2[5, 5]) - _hillshade_closed_form(p, q, az, alt, z=2.0)) <= 1
+
+
+def test_hillshade_multidirectional_flat_and_nodata():
+    dem = np.full((10, 10), 50.0)
+    dem[4, 4] = np.nan
+    hs = core.hillshade(dem, 1.0, -1.0, multidirectional=True)
+    assert hs[4, 4] == 0
+    assert hs[0, 0] == int(np.floor(1 + 254 * np.sin(np.radians(45)) + 0.5))
+    hs = core.hillshade(dem, 1.0, -1.0, compute_edges=False)
+    assert (hs[0, :] == 0).all() and (hs[:, -1] == 0).all()
+
+
+def test_hillshade_algorithm_writes_styled_geotiff(tmp_path):
+    dem = Raster(np.add.outer(np.arange(50.0), np.arange(60.0)).astype(np.float32),
+                 Affine(1, 0, 512000, 0, -1, 5404000), crs=None, nodata=-9999.0)
+    write_raster(dem, tmp_path / "dem.tif")
+    toolbox.run("hillshade", tmp_path / "dem.tif", tmp_path / "hs.tif", azimuth_deg=90.0)
+    with rasterio.open(tmp_path / "hs.tif") as ds:
+        hs = ds.read(1)
+        assert ds.dtypes[0] == "uint8" and ds.nodata == 0
+    assert abs(int(hs[10, 10]) - _hillshade_closed_form(1.0, -1.0, 90, 45)) <= 1
+    assert "singlebandgray" in (tmp_path / "hs.qml").read_text()
+
+
+def test_classify_buildings_and_vegetation_on_synthetic_truth(terrain_scene, tmp_path):
+    rep = toolbox.run("classify", terrain_scene, tmp_path / "c.laz")
+    truth = laspy.read(terrain_scene).classification
+    pred = laspy.read(tmp_path / "c.laz").classification
+    obj = np.isin(truth, [3, 4, 5, 6])
+    building_vs_veg = np.where(truth[obj] == 6, pred[obj] == 6, np.isin(pred[obj], [3, 4, 5]))
+    assert building_vs_veg.mean() >= 0.95  # issue target
+    assert (truth[obj] == pred[obj]).mean() >= 0.95  # low / medium / high too
+    b, pb = truth == 6, pred == 6
+    assert (b & pb).sum() / b.sum() >= 0.98
+    assert set(rep["stats"]["classes"]) <= {1, 2, 3, 4, 5, 6, 7}
+
+
+def test_classify_reports_on_ahn3_buildings(tmp_path):
+    path = shared_file("ahn3_amsterdam/ahn_2386_9702.laz")
+    toolbox.run("classify", path, tmp_path / "a.laz", crs="EPSG:28992")
+    truth = laspy.read(path).classification
+    pred = laspy.read(tmp_path / "a.laz").classification
+    b, pb = truth == 6, pred == 6
+    precision = (b & pb).sum() / pb.sum()
+    recall = (b & pb).sum() / b.sum()
+    # measured 1.00 / 0.68 (see the issue note): keep what we have, catch regressions
+    assert precision >= 0.97 and recall >= 0.6
+
+
+def test_feet_input_gives_dtm_in_feet(tmp_path):
+    path = shared_file("pdal_autzen/autzen_trim.las")
+    rep = toolbox.run("dtm", path, tmp_path / "a.tif", resolution_m=1.0)
+    dtm = read_raster(tmp_path / "a.tif")
+    assert dtm.cell_size == pytest.approx(1 / 0.3048)  # 1 m expressed in the file's feet
+    assert dtm.crs is not None
+    zs = read_points(path).z
+    assert np.nanmin(dtm.data) >= zs.min() - 1 and np.nanmax(dtm.data) <= zs.max()
+    assert read_points(tmp_path / "a_classified.laz").crs == read_points(path).crs  # a non-EPSG CRS kept
+    # The vendor's class 2 here is a thinned subset of the ground (most unclassified points lie
+    # on it), so compare surfaces: our DTM against one made from the vendor's ground points.
+    las = laspy.read(path)
+    g = las.classification == 2
+    grid = core.Grid(dtm.transform.c, dtm.transform.f, dtm.cell_size, *dtm.shape)
+    ref, support = core.dtm_from_ground(grid, np.asarray(las.x)[g], np.asarray(las.y)[g], np.asarray(las.z)[g])
+    both = support & np.isfinite(dtm.data)
+    diff_m = np.abs(dtm.data[both] - ref[both]) * 0.3048
+    assert np.median(diff_m) < 0.1 and np.mean(diff_m < 0.5) > 0.9
+    pred = laspy.read(tmp_path / "a_classified.laz").classification == 2
+    assert ground_errors(g, pred)["type1_pct"] < 2.0  # vendor ground is kept
+
+
+def test_preview_is_an_rgb_png(terrain_scene, tmp_path):
+    toolbox.run("dtm", terrain_scene, tmp_path / "d.tif", outputs={"preview": str(tmp_path / "p.png")})
+    with rasterio.open(tmp_path / "p.png") as ds:
+        img = ds.read()
+    assert img.shape[0] == 3 and img.shape[1:] == read_raster(tmp_path / "d.tif").shape
+    red = (img[0] > 150) & (img[1] < 100)
+    assert 0.01 < red.mean() < 0.4  # buildings and trees drawn in red
+
+
+def test_grids_too_big_for_memory_are_refused_before_work(tmp_path, cli):
+    from toolbox.io.points import PointCloud, parse_crs, write_points
+
+    rng = np.random.default_rng(1)
+    x = np.r_[rng.uniform(0, 10, 50), 200000.0]  # one stray point 200 km away
+    y = np.r_[rng.uniform(0, 10, 50), 200000.0]
+    write_points(PointCloud(x, y, rng.uniform(0, 1, 51), crs=parse_crs("EPSG:25832")), tmp_path / "far.laz")
+    r = cli("run", "dtm", tmp_path / "far.laz", "-o", tmp_path / "d.tif")
+    assert r.returncode == 2
+    assert "million cells" in r.stderr and "GiB" in r.stderr and "filter_cell_m" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["far.laz"]
+
+
+def test_batch_of_tiles_in_parallel(terrain_scene, tmp_path, cli):
+    src = tmp_path / "tiles"
+    src.mkdir()
+    pc = read_points(terrain_scene)
+    from toolbox.io.points import write_points
+
+    x0 = pc.x.min()
+    for i in range(3):
+        m = (pc.x >= x0 + i * 130) & (pc.x < x0 + (i + 1) * 130)
+        write_points(pc.subset(m), src / f"tile{i}.laz")
+    (src / "broken.laz").write_bytes((src / "tile0.laz").read_bytes()[:5000])
+    out = tmp_path / "out"
+    out.mkdir()
+    r = cli("run", "dtm", src, "-o", out, "--json", "-j", "2")
+    assert r.returncode == 1
+    rep = json.loads(r.stdout)
+    assert rep["n_done"] == 3 and rep["n_failed"] == 1 and "broken.laz" in rep["failed"][0]["input"]
+    assert sorted(p.name for p in out.glob("*.tif")) == ["tile0.tif", "tile1.tif", "tile2.tif"]
+    assert sorted(p.name for p in out.glob("*.laz")) == ["tile0_classified.laz", "tile1_classified.laz", "tile2_classified.laz"]
