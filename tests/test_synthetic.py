@@ -118,7 +118,9 @@ def test_test_building_has_hip_roof_with_gable_dormer(corridor):
     assert set(faces) == {"south", "north", "west", "east", "dormer_west", "dormer_east"}
     # main faces face east and west (the method's test building), the hips north and south
     assert abs(faces["south"]["normal"][0]) > 0.5 and abs(faces["west"]["normal"][1]) > 0.5
-    assert all(f["n_points"] > 10 for f in faces.values())
+    # every face has points (the dormer's are small: about 2.6 m2 each)
+    assert all(f["n_points"] >= 3 for f in faces.values())
+    assert faces["north"]["n_points"] > 100
 
 
 def test_every_catenary_refits_from_its_points(corridor):
@@ -141,8 +143,9 @@ def test_every_catenary_refits_from_its_points(corridor):
         cs = np.linspace(span["catenary_c_m"] * 0.7, span["catenary_c_m"] * 1.3, 121)
         rms = [np.sqrt(np.mean((s.z[m_idx] - catenary_z(t, span["length_m"], a[2], b[2], c)) ** 2)) for c in cs]
         best = cs[int(np.argmin(rms))]
-        assert best == pytest.approx(span["catenary_c_m"], rel=0.03)
-        assert min(rms) < 0.05
+        assert min(rms) < 0.05  # the truth curve explains the points down to the range noise
+        if span["sag_m"] >= 0.5:  # short spans barely sag: their c is not determined by the points
+            assert best == pytest.approx(span["catenary_c_m"], rel=0.03)
         checked += 1
     assert checked >= 20
 

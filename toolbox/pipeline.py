@@ -108,6 +108,8 @@ def run(stages: list[dict], *, overwrite: bool = False, crs: str | None = None, 
             else:
                 inputs = []
             output = st.get("output") or str(Path(tmp) / f"{name}{alg.outputs[0].extension}")
+            # a pipeline is a job description: the folders it names are made for it
+            Path(output).parent.mkdir(parents=True, exist_ok=True)
             try:
                 rep = run_algorithm(alg.id, inputs, output, st.get("params") or {},
                                     outputs=st.get("outputs"), overwrite=overwrite, crs=crs, reg=reg)
