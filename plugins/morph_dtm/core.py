@@ -319,13 +319,15 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
     value = np.where(own_good, a0, np.where(support, a, np.where(own, mean_own, np.nan)))
     # a fit evaluated at the centre of a cell whose points sit to one side may extrapolate: keep
     # it within the heights of the points around the cell
-    zlo = np.full(N, np.inf)
-    zhi = np.full(N, -np.inf)
-    np.minimum.at(zlo, flat, z)
-    np.maximum.at(zhi, flat, z)
-    zlo = ndimage.minimum_filter(zlo.reshape(shape), 3, mode="constant", cval=np.inf)
-    zhi = ndimage.maximum_filter(zhi.reshape(shape), 3, mode="constant", cval=-np.inf)
-    value = np.where(np.isfinite(value), np.clip(value, zlo, zhi), value)
+    # (bounds from the neighbourhood's mean and spread: cheaper than per-cell min/max scatters)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zz = ndimage.uniform_filter(np.bincount(flat, weights=z * z, minlength=N).reshape(shape), 3,
+                                    mode="constant") * 9.0
+        mean3 = tot["z"] / n_
+        sd3 = np.sqrt(np.maximum(zz / n_ - mean3 * mean3, 0.0))
+    zlo = mean3 - 2.5 * sd3 - 0.5 * cell
+    zhi = mean3 + 2.5 * sd3 + 0.5 * cell
+    value = np.where(np.isfinite(value) & np.isfinite(mean3), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
     return fill_holes(value, known), known
 
