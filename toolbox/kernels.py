@@ -8,7 +8,6 @@ Importing this module costs nothing; ``toolbox list`` never imports taichi.
 from __future__ import annotations
 
 import contextlib
-import io
 import logging
 import os
 import threading
@@ -54,21 +53,38 @@ def taichi():
             import tempfile
 
             os.environ["HOME"] = tempfile.gettempdir()
-        with contextlib.redirect_stdout(io.StringIO()):  # taichi prints a banner on import
+        # taichi prints a banner on import and chatter on init: keep stdout clean for --json
+        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+        os.environ.setdefault("TI_ENABLE_PYBUF", "0")
+        with open(os.devnull, "w") as devnull, contextlib.redirect_stdout(devnull):
             import taichi as ti
-        arch = requested_arch()
-        kwargs = dict(log_level=ti.WARN, offline_cache=True, random_seed=0)
-        if arch == "auto":
+
+            arch = requested_arch()
+            # fast_math off: kernels must agree with their numpy references vote for vote
+            kwargs = dict(log_level=ti.ERROR, offline_cache=True, random_seed=0, fast_math=False)
+            if arch == "auto":
+                arch = "cuda" if _cuda_present() else "cpu"
             try:
-                ti.init(arch=ti.cuda, **kwargs)
-            except Exception:
-                ti.init(arch=ti.cpu, **kwargs)
-        else:
-            ti.init(arch=getattr(ti, "x64" if arch == "cpu" else arch), **kwargs)
+                ti.init(arch=getattr(ti, "x64" if arch == "cpu" else arch), **kwargs)
+            except Exception as exc:
+                raise UsageError(f"taichi cannot run on {arch} here ({exc}); use --arch cpu") from None
         _arch_used = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
         log.info("taichi initialised on %s", _arch_used)
         _ti = ti
         return ti
+
+
+def _cuda_present() -> bool:
+    """Whether a CUDA driver library loads (without asking taichi, which warns loudly)."""
+    import ctypes
+
+    for name in ("libcuda.so.1", "libcuda.so", "nvcuda.dll"):
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
 
 
 def arch_used() -> str | None:

@@ -134,23 +134,30 @@ def _run_dtm(inputs, params, ctx):
     pc = inputs["points"]
     _check_grids(pc, params)
     t0 = time.perf_counter()
-    gr, _ = _ground(pc, params)
+    if params["ground"] == "file":
+        cls0 = pc.classification
+        if cls0 is None or not np.any(cls0 == 2):
+            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
+        ground, noise = cls0 == 2, cls0 == 7
+    else:
+        gr, _ = _ground(pc, params)
+        ground, noise = gr.ground, gr.noise
     t1 = time.perf_counter()
-    dtm, _ = _dtm_raster(pc, gr.ground, params["resolution_m"])
+    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"])
     t2 = time.perf_counter()
     cls = np.ones(len(pc), np.uint8)
-    cls[gr.ground] = 2
-    cls[gr.noise] = 7
+    cls[ground] = 2
+    cls[noise] = 7
     out = {"dtm": dtm, "classified": pc.with_fields(classification=cls)}
     if ctx.wants("preview"):
-        out["preview"] = _preview(dtm, pc, gr.ground, gr.noise)
-    stats = {"n_points": len(pc), "n_ground": int(gr.ground.sum()), "n_noise": int(gr.noise.sum()),
-             "ground_share": round(float(gr.ground.mean()), 4), "filter_s": round(t1 - t0, 3),
+        out["preview"] = _preview(dtm, pc, ground, noise)
+    stats = {"n_points": len(pc), "n_ground": int(ground.sum()), "n_noise": int(noise.sum()),
+             "ground_share": round(float(ground.mean()), 4), "filter_s": round(t1 - t0, 3),
              "dtm_s": round(t2 - t1, 3)}
     if "label" in pc.fields:  # ISPRS filter-test reference labels: 0 bare earth, 1 object
         from .evaluation import ground_errors
 
-        stats.update({f"isprs_{k}": v for k, v in ground_errors(pc.fields["label"] == 0, gr.ground).items()})
+        stats.update({f"isprs_{k}": v for k, v in ground_errors(pc.fields["label"] == 0, ground).items()})
     return toolbox.Result(outputs=out, stats=stats)
 
 
@@ -220,7 +227,10 @@ def toolbox_algorithms():
                 "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
-            parameters=[resolution, *GROUND_PARAMETERS],
+            parameters=[resolution,
+                        Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or "
+                                  "the file's own class 2 (then only the DTM is made)", choices=("filter", "file")),
+                        *GROUND_PARAMETERS],
             inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud")],
             outputs=[
                 Output("dtm", "raster", "bare-earth DTM", style="dtm"),

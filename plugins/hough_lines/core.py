@@ -1,0 +1,301 @@
+"""2D Hough line detection for power-line conductors (Grigillo, Ozvaldič, Vrečko, Kosmatin Fras
+2015, Geodetski vestnik 59(2) 246-261; METHODS.md §1). Pure functions on numpy arrays; the
+accumulator is filled by a pluggable ``accumulate`` (the taichi kernel or its numpy reference).
+
+Normal form x·cosθ + y·sinθ = ρ, θ ∈ [-90°, 90°) in ``theta_step_deg`` steps, ρ rounded to
+``rho_step_m``. Peaks are taken one at a time (no local-maximum search): the largest cell, its
+inverse-Hough points validated by a run of consecutive points with every gap < V_max spanning at
+least S_min, then the votes of every point within ±``band_m`` of the line subtracted, until the
+largest cell has fewer than ``min_votes`` votes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class HoughLine:
+    rho: float  # of the peak, in the tile's local frame
+    theta_deg: float
+    votes: int
+    members: np.ndarray  # indices (into the input points) of the band used for the fit
+    runs: list = field(default_factory=list)  # validated runs: (t_start, t_end) along the line
+    anchor: np.ndarray | None = None  # SVD fit: a point on the line (local frame)
+    direction: np.ndarray | None = None  # unit vector
+    rms: float = 0.0
+    t_range: tuple = (0.0, 0.0)  # extent of the fitted points along the line
+
+
+class AccumulatorTooLarge(ValueError):
+    pass
+
+
+def accumulator_shape(x, y, rho_step: float, theta_step_deg: float):
+    thetas = np.deg2rad(np.arange(-90.0, 90.0 - 1e-9, theta_step_deg))
+    r = np.hypot(x, y)
+    rmax = float(r.max()) if len(r) else 0.0
+    k_min = int(np.floor(-rmax / rho_step + 0.5)) - 1
+    k_max = int(np.floor(rmax / rho_step + 0.5)) + 1
+    return thetas, k_min, k_max - k_min + 1
+
+
+def runs_along(t: np.ndarray, max_gap: float, min_length: float):
+    """Runs of sorted positions with every gap < ``max_gap`` spanning ≥ ``min_length``."""
+    if len(t) < 2:
+        return []
+    t = np.sort(t)
+    breaks = np.flatnonzero(np.diff(t) >= max_gap)
+    starts = np.r_[0, breaks + 1]
+    ends = np.r_[breaks, len(t) - 1]
+    return [(float(t[s]), float(t[e])) for s, e in zip(starts, ends) if t[e] - t[s] >= min_length]
+
+
+def fit_line(px, py, max_gap: float):
+    """SVD line fit on centred points, leaving out isolated ones (no neighbour within max_gap)."""
+    pts = np.column_stack([px, py])
+    if len(pts) >= 3:
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(pts).query(pts, k=2)
+        keep = d[:, 1] < max_gap
+        if keep.sum() >= 2:
+            pts = pts[keep]
+    c = pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
+    direction = vt[0] / np.linalg.norm(vt[0])
+    normal = np.array([-direction[1], direction[0]])
+    resid = (pts - c) @ normal
+    return c, direction, float(np.sqrt(np.mean(resid ** 2))) if len(resid) else 0.0
+
+
+def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: float = 0.1, band_m: float = 0.4,
+                 min_votes: int = 15, s_min_m: float = 8.0, v_max_m: float = 2.5, max_lines: int = 500,
+                 max_accumulator_bytes: int = 2 << 30, fit_points: str = "band") -> list[HoughLine]:
+    """Lines in points (x, y) of one tile, already shifted to a local origin (numerical range).
+
+    ``accumulate(x, y, cos_t, sin_t, k_min, inv_drho, acc, sign)`` fills the accumulator.
+    ``fit_points``: "inverse" refits each line on its inverse-Hough points (the paper's choice,
+    quantised to the ρ bin), "band" on the points within ±band_m (sharper).
+    """
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    if len(x) < 2:
+        return []
+    thetas, k_min, rows = accumulator_shape(x, y, rho_step_m, theta_step_deg)
+    nbytes = rows * len(thetas) * 4
+    if nbytes > max_accumulator_bytes:
+        raise AccumulatorTooLarge(
+            f"a {rows} x {len(thetas)} accumulator needs {nbytes / 2**30:.1f} GiB "
+            f"(limit {max_accumulator_bytes / 2**30:.1f} GiB)")
+    cos_t, sin_t = np.cos(thetas), np.sin(thetas)
+    inv = 1.0 / rho_step_m
+    acc = np.zeros((rows, len(thetas)), np.int32)
+    accumulate(x, y, cos_t, sin_t, k_min, inv, acc, 1)
+    active = np.ones(len(x), bool)
+    lines: list[HoughLine] = []
+    for _ in range(max_lines * 4):
+        peak = int(np.argmax(acc))
+        r, c = divmod(peak, acc.shape[1])
+        votes = int(acc[r, c])
+        if votes < min_votes:
+            break
+        rho_p = (r + k_min) * rho_step_m
+        rho_pts = x * cos_t[c] + y * sin_t[c]
+        k_pts = np.floor(rho_pts * inv + 0.5).astype(np.int64) - k_min
+        inverse = np.flatnonzero(active & (k_pts == r))
+        band = np.flatnonzero(active & (np.abs(rho_pts - rho_p) <= band_m))
+        # along-line positions: t = -x sinθ + y cosθ
+        t_inv = -x[inverse] * sin_t[c] + y[inverse] * cos_t[c]
+        runs = runs_along(t_inv, v_max_m, s_min_m)
+        if runs:
+            members = band if fit_points == "band" else inverse
+            # only the points of the validated runs are the conductor
+            t_mem = -x[members] * sin_t[c] + y[members] * cos_t[c]
+            on_run = np.zeros(len(members), bool)
+            for a, b in runs:
+                on_run |= (t_mem >= a - v_max_m) & (t_mem <= b + v_max_m)
+            members = members[on_run]
+            anchor, direction, rms = fit_line(x[members], y[members], v_max_m)
+            tt = (np.column_stack([x[members], y[members]]) - anchor) @ direction
+            lines.append(HoughLine(rho_p, float(np.degrees(thetas[c])), votes, members, runs, anchor, direction, rms,
+                                   (float(tt.min()), float(tt.max()))))
+        # subtract the band's votes (also for a rejected peak, so that the next one comes up)
+        if len(band) == 0:
+            acc[r, c] = 0  # numerically isolated cell: clear it
+            continue
+        accumulate(x[band], y[band], cos_t, sin_t, k_min, inv, acc, -1)
+        active[band] = False
+        if len(lines) >= max_lines:
+            break
+    return lines
+
+
+def segments_of(line: HoughLine, x, y, v_max_m: float, s_min_m: float):
+    """Validated runs of a fitted line: (start xy, end xy) pairs along its fitted direction."""
+    pts = np.column_stack([x[line.members], y[line.members]])
+    t = (pts - line.anchor) @ line.direction
+    return [(line.anchor + a * line.direction, line.anchor + b * line.direction)
+            for a, b in runs_along(t, v_max_m, s_min_m)]
+
+
+def intersect(p1, d1, p2, d2):
+    """Intersection of two infinite lines (point, direction); None when (nearly) parallel."""
+    cross = d1[0] * d2[1] - d1[1] * d2[0]
+    if abs(cross) < np.sin(np.radians(2.0)):
+        return None
+    diff = np.asarray(p2) - np.asarray(p1)
+    s = (diff[0] * d2[1] - diff[1] * d2[0]) / cross
+    return np.asarray(p1) + s * np.asarray(d1)
+
+
+def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, merge_m: float = 1.0):
+    """Crossings of conductor lines (the method's §5): pairwise intersections of the fitted lines,
+    kept where some pair of validated segments (each extended by ``extend_m``) also intersects
+    within ``tolerance_m``; crossings closer than ``merge_m`` are averaged.
+
+    ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). Returns a list of
+    dicts (x, y, n_lines, angle_deg, lines).
+    """
+    found = []
+    for i in range(len(lines)):
+        for j in range(i + 1, len(lines)):
+            p = intersect(lines[i][0], lines[i][1], lines[j][0], lines[j][1])
+            if p is None:
+                continue
+            ok = False
+            for a1, b1 in segments[i]:
+                d1 = (b1 - a1) / max(np.linalg.norm(b1 - a1), 1e-9)
+                a1e, b1e = a1 - extend_m * d1, b1 + extend_m * d1
+                for a2, b2 in segments[j]:
+                    d2 = (b2 - a2) / max(np.linalg.norm(b2 - a2), 1e-9)
+                    a2e, b2e = a2 - extend_m * d2, b2 + extend_m * d2
+                    q = _segment_intersection(a1e, b1e, a2e, b2e)
+                    if q is not None and np.linalg.norm(q - p) <= tolerance_m:
+                        ok = True
+                        break
+                if ok:
+                    break
+            if ok:
+                cosang = abs(float(np.dot(lines[i][1], lines[j][1])))
+                found.append((p, {i, j}, float(np.degrees(np.arccos(min(cosang, 1.0))))))
+    # where several lines meet, or tiles repeat a crossing: the mean
+    merged = []
+    used = [False] * len(found)
+    for a in range(len(found)):
+        if used[a]:
+            continue
+        group = [a]
+        used[a] = True
+        for b in range(a + 1, len(found)):
+            if not used[b] and np.linalg.norm(found[b][0] - found[a][0]) <= merge_m:
+                group.append(b)
+                used[b] = True
+        pts = np.array([found[g][0] for g in group])
+        ids = set().union(*[found[g][1] for g in group])
+        merged.append({"x": float(pts[:, 0].mean()), "y": float(pts[:, 1].mean()), "n_lines": len(ids),
+                       "angle_deg": float(min(found[g][2] for g in group)), "lines": sorted(ids)})
+    return merged
+
+
+def _segment_intersection(a1, b1, a2, b2):
+    d1, d2 = b1 - a1, b2 - a2
+    cross = d1[0] * d2[1] - d1[1] * d2[0]
+    if abs(cross) < 1e-12:
+        return None
+    diff = a2 - a1
+    s = (diff[0] * d2[1] - diff[1] * d2[0]) / cross
+    u = (diff[0] * d1[1] - diff[1] * d1[0]) / cross
+    if 0 <= s <= 1 and 0 <= u <= 1:
+        return a1 + s * d1
+    return None
+
+
+# ------------------------------------------------------------------------------------------
+# tiles (the method's §4) and merging across them
+# ------------------------------------------------------------------------------------------
+
+@dataclass
+class Conductor:
+    anchor: np.ndarray  # world coordinates
+    direction: np.ndarray
+    members: np.ndarray  # indices into the input points
+    votes: int
+    rms: float
+    t_range: tuple
+    segments: list  # [(a, b)] world coordinates
+
+
+def tiles(x, y, size: float, overlap: float):
+    """(x0, y0, mask) of square tiles of ``size`` overlapping by ``overlap``."""
+    step = size - overlap
+    xs = np.arange(x.min(), max(x.max() - overlap, x.min()) + 1e-9, step)
+    ys = np.arange(y.min(), max(y.max() - overlap, y.min()) + 1e-9, step)
+    for x0 in xs:
+        mx = (x >= x0) & (x < x0 + size)
+        if not mx.any():
+            continue
+        for y0 in ys:
+            m = mx & (y >= y0) & (y < y0 + size)
+            if m.sum() >= 2:
+                yield float(x0), float(y0), m
+
+
+def detect_tiled(x, y, accumulate, *, tile_size_m: float = 100.0, overlap_m: float = 10.0,
+                 merge_angle_deg: float = 1.0, merge_offset_m: float = 0.25, merge_gap_m: float = 25.0, progress=None,
+                 **kw) -> list[Conductor]:
+    """Hough lines per tile (each shifted to its minimum x, y), shifted back and merged: lines that
+    are collinear (angle < merge_angle_deg, offset < merge_offset_m) and overlap or come within
+    merge_gap_m of each other along their direction (tile overlaps, the gap at a pylon) become one
+    conductor, refitted on all its points."""
+    found = []
+    tile_list = list(tiles(x, y, tile_size_m, overlap_m)) if tile_size_m > 0 else [(float(x.min()), float(y.min()), np.ones(len(x), bool))]
+    it = progress(tile_list) if progress else tile_list
+    v_max = kw.get("v_max_m", 2.5)
+    s_min = kw.get("s_min_m", 8.0)
+    for x0, y0, m in it:
+        idx = np.flatnonzero(m)
+        for L in detect_lines(x[idx] - x0, y[idx] - y0, accumulate, **kw):
+            found.append(Conductor(L.anchor + (x0, y0), L.direction, idx[L.members], L.votes, L.rms,
+                                   L.t_range, []))
+    # merge collinear pieces (union-find over pairs)
+    parent = list(range(len(found)))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    cos_lim = np.cos(np.radians(merge_angle_deg))
+    for i in range(len(found)):
+        for j in range(i + 1, len(found)):
+            a, b = found[i], found[j]
+            if abs(float(np.dot(a.direction, b.direction))) < cos_lim:
+                continue
+            n = np.array([-a.direction[1], a.direction[0]])
+            if abs(float(np.dot(b.anchor - a.anchor, n))) > merge_offset_m:
+                continue
+            # they must overlap or nearly touch along the line (tile overlap, a pylon's gap)
+            ends = sorted(float(np.dot(b.anchor + t * b.direction - a.anchor, a.direction)) for t in b.t_range)
+            if ends[0] > a.t_range[1] + merge_gap_m or ends[1] < a.t_range[0] - merge_gap_m:
+                continue
+            parent[root(j)] = root(i)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(found)):
+        groups.setdefault(root(i), []).append(i)
+    out = []
+    for g in groups.values():
+        members = np.unique(np.concatenate([found[i].members for i in g]))
+        anchor, direction, rms = fit_line(x[members], y[members], v_max)
+        pts = np.column_stack([x[members], y[members]])
+        t = (pts - anchor) @ direction
+        runs = runs_along(t, v_max, s_min)
+        if not runs:
+            continue
+        segs = [(anchor + a * direction, anchor + b * direction) for a, b in runs]
+        out.append(Conductor(anchor, direction, members, int(sum(found[i].votes for i in g)), rms,
+                             (float(t.min()), float(t.max())), segs))
+    return out

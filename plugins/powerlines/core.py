@@ -1,0 +1,244 @@
+"""Power-line pre-classification and the 3D conductor step (pure numpy/scipy).
+
+* ``shape_classes``: eigenvalue shape of each candidate's neighbourhood: linear (wires),
+  planar (roofs: a flat 2D patch) or rugged (vegetation: volumetric scatter). It stands in for the
+  planar/rugged pre-classification the method ran in LAStools.
+* ``conductors_3d``: beyond the method's 2D limit — the 3D points near a 2D line are split by
+  height and continuity (so wires stacked in plan come apart), each wire into spans at its
+  attachment points (the highest points between sags), and a catenary
+  z = z0 + c·(cosh((s - s0)/c) - 1) is fitted per span in its vertical plane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+
+def sample_grid(data: np.ndarray, transform, x, y) -> np.ndarray:
+    """Bilinear value of a north-up grid (cell centres) at x, y; NaN cells fall back to the nearest
+    finite value around them."""
+    z = np.asarray(data, np.float64)
+    if not np.isfinite(z).all():
+        from scipy import ndimage
+
+        bad = ~np.isfinite(z)
+        idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+        z = z[tuple(idx)]
+    r = (transform.f - y) / -transform.e - 0.5
+    c = (x - transform.c) / transform.a - 0.5
+    rows, cols = z.shape
+    r = np.clip(r, 0, rows - 1)
+    c = np.clip(c, 0, cols - 1)
+    r0 = np.minimum(r.astype(np.int64), max(rows - 2, 0))
+    c0 = np.minimum(c.astype(np.int64), max(cols - 2, 0))
+    fr, fc = r - r0, c - c0
+    r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
+    return (z[r0, c0] * (1 - fr) * (1 - fc) + z[r0, c1] * (1 - fr) * fc + z[r1, c0] * fr * (1 - fc) + z[r1, c1] * fr * fc)
+
+
+def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
+                  surface_density: float | None = None):
+    """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.
+
+    Roofs and crowns are surfaces *as dense as the survey's*: with ``surface_density`` (points per
+    square unit) a planar or rugged neighbourhood also needs half that density within radius 1,
+    which parallel wires (flat or tent-shaped, but sparse) never have."""
+    n = len(xyz)
+    if n < 4:
+        return np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    k = min(neighbours, n)
+    tree = cKDTree(xyz)
+    _, idx = tree.query(xyz, k=k, workers=-1)
+    nb = xyz[idx.reshape(n, k)]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    ev = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", centred, centred) / k)
+    share = ev / (ev.sum(axis=1, keepdims=True) + 1e-12)
+    rugged = share[:, 0] >= rugged_share
+    planar = ~rugged & (share[:, 1] >= planar_share)
+    if surface_density is not None:
+        # roofs and crowns are surfaces as dense as the survey's; parallel wires (a flat or, with
+        # a raised middle phase, a tent-shaped set) are sparse
+        for mask in (planar, rugged):
+            p = np.flatnonzero(mask)
+            if len(p):
+                counts = tree.query_ball_point(xyz[p], 1.0, return_length=True, workers=-1)
+                mask[p] = counts >= 0.5 * np.pi * surface_density
+    linear = ~rugged & ~planar
+    # edges of roofs (and of crowns) are locally linear: a wire never touches a surface
+    for surface, reach in ((planar, 1.0), (rugged, 0.5)):
+        if surface.any() and linear.any():
+            d, _ = cKDTree(xyz[surface]).query(xyz[linear], k=1, distance_upper_bound=reach, workers=-1)
+            li = np.flatnonzero(linear)
+            linear[li[np.isfinite(d)]] = False
+    return linear, planar, rugged
+
+
+@dataclass
+class Span:
+    conductor: int  # index of the 2D line
+    wire: int  # index of the wire (height level) along that line
+    span: int
+    s0: float
+    c: float
+    z0: float
+    s_from: float
+    s_to: float
+    rms: float
+    n_points: int
+    sag: float
+
+
+def catenary(s, z0, s0, c):
+    with np.errstate(over="ignore"):
+        return z0 + c * (np.cosh((s - s0) / c) - 1.0)
+
+
+def fit_catenary(s, z):
+    """Least-squares catenary through (s, z); returns (z0, s0, c, rms)."""
+    from scipy.optimize import least_squares
+
+    i = int(np.argmin(z))
+    span = max(float(s.max() - s.min()), 1.0)
+    sag_guess = max(float(z.max() - z.min()), 0.05)
+    c0 = max(span * span / (8 * sag_guess), 10.0)
+
+    def res(p):
+        return catenary(s, p[0], p[1], np.exp(p[2])) - z
+
+    sol = least_squares(res, [float(z[i]), float(s[i]), np.log(c0)], loss="soft_l1", f_scale=0.1)
+    z0, s0, lc = sol.x
+    r = res(sol.x)
+    return float(z0), float(s0), float(np.exp(lc)), float(np.sqrt(np.mean(r * r)))
+
+
+def split_spans(s, z, min_span: float, bin_m: float = 2.0):
+    """Cut positions along a wire at its attachment points: interior maxima of the binned height
+    profile that stand clearly above the sags on both sides."""
+    if s.max() - s.min() < 2 * min_span:
+        return []
+    edges = np.arange(s.min(), s.max() + bin_m, bin_m)
+    which = np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 2)
+    top = np.full(len(edges) - 1, -np.inf)
+    np.maximum.at(top, which, z)
+    valid = np.isfinite(top)
+    centres = (edges[:-1] + edges[1:]) / 2
+    cuts = []
+    win = int(max(min_span / bin_m, 3))
+    for b in np.flatnonzero(valid):
+        lo, hi = max(b - win, 0), min(b + win + 1, len(top))
+        seg = top[lo:hi]
+        if top[b] < np.max(seg[np.isfinite(seg)]):
+            continue
+        left = top[lo:b][np.isfinite(top[lo:b])]
+        right = top[b + 1:hi][np.isfinite(top[b + 1:hi])]
+        if len(left) and len(right) and top[b] - left.min() > 0.2 and top[b] - right.min() > 0.2:
+            if centres[b] - s.min() > min_span and s.max() - centres[b] > min_span:
+                cuts.append(float(centres[b]))
+    return cuts
+
+
+def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
+                  min_points: int = 20):
+    """Wires and their catenary spans along each 2D line.
+
+    ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points. Returns
+    (spans, wire_point_index) where wire_point_index maps point index -> (line, wire).
+    """
+    tree = cKDTree(np.column_stack([px, py]))
+    spans: list[Span] = []
+    members = {}
+    for li, (anchor, direction, t0, t1) in enumerate(lines):
+        normal = np.array([-direction[1], direction[0]])
+        mid = anchor + direction * (t0 + t1) / 2
+        half = (t1 - t0) / 2 + band
+        cand = np.asarray(tree.query_ball_point(mid, np.hypot(half, band)), dtype=np.int64)
+        if len(cand) == 0:
+            continue
+        d = np.column_stack([px[cand], py[cand]]) - anchor
+        off = d @ normal
+        s = d @ direction
+        near = (np.abs(off) <= band) & (s >= t0 - band) & (s <= t1 + band)
+        cand, s = cand[near], s[near]
+        if len(cand) < min_points:
+            continue
+        z = pz[cand]
+        # height and continuity: link points close along the line and in height
+        scaled = np.column_stack([s / s_link, z / z_link])
+        pairs = cKDTree(scaled).query_pairs(1.0, output_type="ndarray")
+        g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
+            if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))
+        _, lab = connected_components(g, directed=False)
+        wire_of = _chain_pieces(s, z, lab, min_points, gap_max=4 * s_link, z_tol=z_link)
+        for k in range(lab.max() + 1):
+            m = lab == k
+            if wire_of[k] < 0 or s[m].max() - s[m].min() < min_span:
+                continue
+            wire = int(wire_of[k])
+            sk, zk, ik = s[m], z[m], cand[m]
+            cuts = split_spans(sk, zk, min_span)
+            bounds = [sk.min()] + cuts + [sk.max() + 1e-9]
+            for j in range(len(bounds) - 1):
+                sel = (sk >= bounds[j]) & (sk < bounds[j + 1])
+                if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_span:
+                    continue
+                z0, s0, c, rms = fit_catenary(sk[sel], zk[sel])
+                a, b = float(sk[sel].min()), float(sk[sel].max())
+                ss = np.linspace(a, b, 200)
+                chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
+                sag = float(np.max(chord - catenary(ss, z0, s0, c)))
+                spans.append(Span(li, wire, j, s0, c, z0, a, b, rms, int(sel.sum()), sag))
+                for i in ik[sel]:
+                    members[int(i)] = (li, wire)
+    return spans, members
+
+
+def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float) -> np.ndarray:
+    """Wire number of each connected piece (-1: too small). Pieces follow each other along the
+    line across gaps (pylons, occlusions) when one ends where the next begins, at about the same
+    height; wires are numbered from the highest down."""
+    n = lab.max() + 1
+    counts = np.bincount(lab, minlength=n)
+    info = []
+    for k in range(n):
+        if counts[k] < min_points:
+            continue
+        m = lab == k
+        sk, zk = s[m], z[m]
+        lo, hi = sk.min(), sk.max()
+        z_lo = float(np.median(zk[sk <= lo + 2.0]))
+        z_hi = float(np.median(zk[sk >= hi - 2.0]))
+        info.append((float(lo), float(hi), z_lo, z_hi, k, float(np.median(zk))))
+    info.sort()
+    parent = {k: k for *_, k, _ in info}
+
+    def root(a):
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    taken_next = set()
+    for i, (lo_i, hi_i, _, zhi_i, ki, _) in enumerate(info):
+        best = None
+        for lo_j, hi_j, zlo_j, _, kj, _ in info[i + 1:]:
+            gap = lo_j - hi_i
+            if gap < -1.0 or gap > gap_max or kj in taken_next:
+                continue
+            dz = abs(zlo_j - zhi_i)
+            if dz <= z_tol and (best is None or gap < best[0]):
+                best = (gap, kj)
+        if best is not None:
+            taken_next.add(best[1])
+            parent[root(best[1])] = root(ki)
+    wire_of = np.full(n, -1)
+    roots = sorted({root(k) for *_, k, _ in info},
+                   key=lambda r: -np.median([zm for *_, k, zm in info if root(k) == r]))
+    for w, r in enumerate(roots):
+        for *_, k, _ in info:
+            if root(k) == r:
+                wire_of[k] = w
+    return wire_of

@@ -1,0 +1,169 @@
+"""Adapter of the power-line chain ``powerlines``: ground and height above ground (through the
+``dtm`` algorithm), candidates, top-hat (``tophat``), tiled 2D Hough with crossings
+(``hough-lines``'s core through its algorithm), the 3D conductor step; a GeoPackage."""
+
+from __future__ import annotations
+
+import toolbox
+from toolbox import Algorithm, DataError, Input, Output, Parameter
+
+REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
+             "3D step: catenary per span (beyond the method's stated 2D limitation)")
+
+
+def _run(inputs, params, ctx):
+    import time
+
+    import numpy as np
+    from shapely.geometry import LineString
+
+    from toolbox.io.points import PointCloud
+
+    from .core import conductors_3d, sample_grid, shape_classes
+
+    pc = inputs["points"]
+    pc.require_points("powerlines", 100)
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    timings = {}
+    t = time.perf_counter()
+    # 1. ground and height above ground, through the DTM algorithm
+    dres = ctx.call("dtm", {"points": pc}, ground=params["ground"], resolution_m=1.0)
+    dtm = dres.outputs["dtm"]
+    ground_cls = dres.outputs["classified"].classification
+    hag = (pc.z - sample_grid(dtm.data, dtm.transform, pc.x, pc.y)) * vu  # metres
+    timings["ground_s"] = time.perf_counter() - t
+
+    # 2. candidates: not ground or noise, height window, first returns where the file has them
+    t = time.perf_counter()
+    cand = (ground_cls != 2) & (ground_cls != 7) & (hag >= params["height_min_m"])
+    h_max = params["height_max_m"]
+    if h_max is None:  # automatic: everything above the window's floor, minus the topmost outliers
+        above = hag[cand]
+        h_max = float(np.percentile(above, 99.95)) + 1.0 if len(above) else 12.0
+    cand &= hag <= h_max
+    rn = pc.fields.get("return_number")
+    if params["first_returns_only"] and rn is not None and np.any(rn > 0):
+        cand &= rn == 1
+    idx = np.flatnonzero(cand)
+    if len(idx) < 10:
+        raise DataError(f"input {pc.source!r}: only {len(idx)} points between {params['height_min_m']} and {h_max:.1f} m "
+                        "above ground; check height_min_m / height_max_m")
+    xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
+    # the survey's surface density: points per occupied square metre (corridor strips included)
+    cells = np.unique(np.floor(pc.x * hu).astype(np.int64) * 10_000_000 + np.floor(pc.y * hu).astype(np.int64))
+    surface_density = len(pc) / max(len(cells), 1)
+    if rn is not None and np.any(rn > 0) and params["first_returns_only"]:
+        surface_density *= float(np.mean(rn == 1))
+    linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
+                                           params["planar_share"], surface_density)
+    keep = idx[linear]
+    timings["candidates_s"] = time.perf_counter() - t
+
+    # 3. top-hat filter and 4. tiled Hough (through their algorithms)
+    t = time.perf_counter()
+    sub = pc.subset(keep)
+    th = ctx.call("tophat", {"points": sub}, cell_size_m=params["cell_size_m"],
+                  max_points_per_cell=params["max_points_per_cell"]).outputs["points"]
+    timings["tophat_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
+                                 "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
+    lines = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
+    timings["hough_s"] = time.perf_counter() - t
+
+    # 5. 3D: wires along each 2D line, split by height and continuity, a catenary per span
+    t = time.perf_counter()
+    cond = lines["conductors"]
+    geo = []
+    for g in cond.geometry:
+        (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+        a = np.array([ax, ay]) * hu
+        d = np.array([bx - ax, by - ay]) * hu
+        L = float(np.hypot(*d))
+        geo.append((a, d / L, 0.0, L))
+    band3d = min(params["band_m"], 0.3)
+    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, band3d,
+                                   z_link=1.0, s_link=2 * params["v_max_m"], min_span=params["s_min_m"])
+    timings["conductors_3d_s"] = time.perf_counter() - t
+
+    # attributes of the 2D conductors: heights above ground of their 3D points
+    hmin, hmax = [], []
+    wire_of = np.full(len(pc), -1)
+    for i_local, (li, w) in members.items():
+        wire_of[keep[i_local]] = li
+    for li in range(len(cond)):
+        h = hag[wire_of == li]
+        hmin.append(float(h.min()) if len(h) else np.nan)
+        hmax.append(float(h.max()) if len(h) else np.nan)
+    cond = cond.assign(height_min_m=hmin, height_max_m=hmax,
+                       n_wires=[len({w for (l2, w) in members.values() if l2 == li}) for li in range(len(cond))])
+    import geopandas as gpd
+
+    rows, geoms = [], []
+    for sp in spans:
+        a, dvec, _, _ = geo[sp.conductor]
+        ss = np.linspace(sp.s_from, sp.s_to, max(int((sp.s_to - sp.s_from) / 2.0), 2) + 1)
+        from .core import catenary
+
+        zz = catenary(ss, sp.z0, sp.s0, sp.c)
+        xy = a[None, :] + ss[:, None] * dvec[None, :]
+        geoms.append(LineString(np.column_stack([xy[:, 0] / hu, xy[:, 1] / hu, zz / vu])))
+        rows.append({"conductor": sp.conductor, "wire": sp.wire, "span": sp.span, "sag_m": sp.sag,
+                     "catenary_c_m": sp.c, "rms_m": sp.rms, "n_points": sp.n_points,
+                     "length_m": sp.s_to - sp.s_from})
+    c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
+        {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+    c3d.attrs["geometry_type"] = "LineString Z"
+    layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
+              "crossings": lines["crossings"], "conductors_3d": c3d}
+    out = {"lines": layers}
+    if ctx.wants("classified"):
+        cls = np.asarray(ground_cls).copy()
+        cls[cls != 2] = 1
+        cls[wire_of >= 0] = 14
+        out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
+    stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
+             "height_max_m_used": round(h_max, 2), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((wire_of >= 0).sum()),
+             **{k: round(v, 3) for k, v in timings.items()}}
+    return toolbox.Result(out, stats=stats)
+
+
+@toolbox.hookimpl
+def toolbox_algorithms():
+    from toolbox_plugins.hough_lines.plugin import PARAMETERS as HOUGH  # noqa: F401  (same package family)
+
+    return [Algorithm(
+        id="powerlines", title="Power-line conductors from a raw point cloud", run=_run,
+        description=(
+            "The method's chain: ground and height above ground (dtm), candidates by class, returns and a height "
+            "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
+            "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
+            "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
+            "per span. GeoPackage layers conductors, conductor_segments, crossings, conductors_3d."),
+        reference=REFERENCE,
+        parameters=[
+            Parameter("ground", str, "filter", "ground from the morphological filter or the file's class 2",
+                      choices=("filter", "file")),
+            Parameter("height_min_m", float, 3.5, "lowest candidate height above ground (the method: 3.5 m)",
+                      unit="m", minimum=0.0, maximum=500.0),
+            Parameter("height_max_m", float, None, "highest candidate height above ground; the method's 12 m suits "
+                      "distribution lines, transmission lines sit at 10-60 m; auto: up to the highest points "
+                      "(99.95th percentile)", unit="m", minimum=0.0, maximum=1000.0, allow_auto=True),
+            Parameter("first_returns_only", bool, True, "keep first returns only (ignored when the file has no return numbers)"),
+            Parameter("neighbours", int, 12, "points in each shape (eigenvalue) neighbourhood", minimum=4, maximum=100),
+            Parameter("rugged_share", float, 0.04, "smallest-eigenvalue share above which a neighbourhood is "
+                      "vegetation", minimum=0.0, maximum=0.34),
+            Parameter("planar_share", float, 0.2, "middle-eigenvalue share above which a flat neighbourhood is a roof",
+                      minimum=0.0, maximum=0.5),
+            Parameter("cell_size_m", float, 0.5, "top-hat mask cell", unit="m", minimum=0.01, maximum=10.0),
+            Parameter("max_points_per_cell", int, 45, "top-hat: denser cells are dropped", unit="points", minimum=1),
+            *HOUGH[:-1],
+        ],
+        inputs=[Input("points", "points", "raw LAS/LAZ point cloud")],
+        outputs=[
+            Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d"),
+            Output("classified", "points", "the input with the detected wire points as class 14", optional=True,
+                   suffix="_wires"),
+        ],
+    )]
