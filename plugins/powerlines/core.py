@@ -99,47 +99,62 @@ def catenary(s, z0, s0, c):
 
 
 def fit_catenary(s, z):
-    """Least-squares catenary through (s, z); returns (z0, s0, c, rms)."""
+    """Least-squares catenary through (s, z); returns (z0, s0, c, rms). Started from the parabola
+    through the points (a catenary's first-order form: z0 + (s - s0)^2 / 2c)."""
     from scipy.optimize import least_squares
 
-    i = int(np.argmin(z))
     span = max(float(s.max() - s.min()), 1.0)
-    sag_guess = max(float(z.max() - z.min()), 0.05)
-    c0 = max(span * span / (8 * sag_guess), 10.0)
+    sm = float(s.mean())
+    k, b, a = np.polyfit(s - sm, z, 2)
+    if k > 1e-7:
+        c0 = 1.0 / (2.0 * k)
+        s00 = sm - b / (2.0 * k)
+        z00 = a - b * b / (4.0 * k)
+    else:  # (nearly) straight: a very tight wire
+        c0, s00, z00 = 50.0 * span, float(s[np.argmin(z)]), float(z.min())
+    c0 = float(np.clip(c0, 1.0, 1e7))
 
     def res(p):
         return catenary(s, p[0], p[1], np.exp(p[2])) - z
 
-    sol = least_squares(res, [float(z[i]), float(s[i]), np.log(c0)], loss="soft_l1", f_scale=0.1)
+    sol = least_squares(res, [z00, s00, np.log(c0)], loss="soft_l1", f_scale=0.1)
     z0, s0, lc = sol.x
     r = res(sol.x)
     return float(z0), float(s0), float(np.exp(lc)), float(np.sqrt(np.mean(r * r)))
 
 
-def split_spans(s, z, min_span: float, bin_m: float = 2.0):
-    """Cut positions along a wire at its attachment points: interior maxima of the binned height
-    profile that stand clearly above the sags on both sides."""
+def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02):
+    """Cut positions along a wire at its attachment points. Along one catenary the slope only
+    grows; where the slope drops (rising on the left, falling on the right) the wire passes an
+    attachment point. Slopes come from least-squares lines over ``window_m`` on each side."""
     if s.max() - s.min() < 2 * min_span:
         return []
-    edges = np.arange(s.min(), s.max() + bin_m, bin_m)
-    which = np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 2)
-    top = np.full(len(edges) - 1, -np.inf)
-    np.maximum.at(top, which, z)
-    valid = np.isfinite(top)
-    centres = (edges[:-1] + edges[1:]) / 2
+    order = np.argsort(s)
+    s, z = s[order], z[order]
+    step = 1.0
+    pos = np.arange(s.min() + min_span, s.max() - min_span, step)
+    lo = np.searchsorted(s, pos - window_m)
+    mid = np.searchsorted(s, pos)
+    hi = np.searchsorted(s, pos + window_m)
+    # prefix sums for least-squares slopes over index ranges
+    cs, cz = np.r_[0, np.cumsum(s)], np.r_[0, np.cumsum(z)]
+    css, csz = np.r_[0, np.cumsum(s * s)], np.r_[0, np.cumsum(s * z)]
+
+    def slope(i, j):
+        n = j - i
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sx, sz = cs[j] - cs[i], cz[j] - cz[i]
+            sxx, sxz = css[j] - css[i], csz[j] - csz[i]
+            return np.where(n >= 5, (n * sxz - sx * sz) / (n * sxx - sx * sx), np.nan)
+
+    left, right = slope(lo, mid), slope(mid, hi)
+    drop = left - right
+    cand = np.isfinite(drop) & (drop > min_drop)
     cuts = []
-    win = int(max(min_span / bin_m, 3))
-    for b in np.flatnonzero(valid):
-        lo, hi = max(b - win, 0), min(b + win + 1, len(top))
-        seg = top[lo:hi]
-        if top[b] < np.max(seg[np.isfinite(seg)]):
-            continue
-        left = top[lo:b][np.isfinite(top[lo:b])]
-        right = top[b + 1:hi][np.isfinite(top[b + 1:hi])]
-        if len(left) and len(right) and top[b] - left.min() > 0.2 and top[b] - right.min() > 0.2:
-            if centres[b] - s.min() > min_span and s.max() - centres[b] > min_span:
-                cuts.append(float(centres[b]))
-    return cuts
+    for i in np.flatnonzero(cand)[np.argsort(-drop[cand])]:
+        if all(abs(pos[i] - c) >= min_span for c in cuts):
+            cuts.append(float(pos[i]))
+    return sorted(cuts)
 
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,

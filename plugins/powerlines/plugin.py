@@ -73,19 +73,32 @@ def _run(inputs, params, ctx):
 
     # 5. 3D: wires along each 2D line, split by height and continuity, a catenary per span
     t = time.perf_counter()
-    cond = lines["conductors"]
     geo = []
+    cond = lines["conductors"]
     for g in cond.geometry:
         (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
         a = np.array([ax, ay]) * hu
         d = np.array([bx - ax, by - ay]) * hu
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
-    band3d = min(params["band_m"], 0.3)
-    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, band3d,
+    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_m"],
                                    z_link=1.0, s_link=2 * params["v_max_m"], min_span=params["s_min_m"])
+    # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
+    # and hangs gently (pylon members and roof edges are straight in plan but not wires)
+    good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and
+            abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
+    if params["validate_3d"]:
+        keep_lines = sorted(good)
+        remap = {old: new for new, old in enumerate(keep_lines)}
+        lines = _select_conductors(lines, keep_lines)
+        geo = [geo[i] for i in keep_lines]
+        spans = [sp for sp in spans if sp.conductor in remap]
+        for sp in spans:
+            sp.conductor = remap[sp.conductor]
+        members = {i: (remap[li], w) for i, (li, w) in members.items() if li in remap}
     timings["conductors_3d_s"] = time.perf_counter() - t
 
+    cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
     wire_of = np.full(len(pc), -1)
@@ -129,6 +142,25 @@ def _run(inputs, params, ctx):
     return toolbox.Result(out, stats=stats)
 
 
+def _select_conductors(lines: dict, keep: list) -> dict:
+    """Keep the given conductors (renumbered) with their segments and the crossings among them."""
+    cond = lines["conductors"]
+    remap = {old: new for new, old in enumerate(keep)}
+    new_cond = cond.iloc[keep].reset_index(drop=True).assign(conductor=list(range(len(keep))))
+    seg = lines["conductor_segments"]
+    seg = seg[seg["conductor"].isin(keep)].reset_index(drop=True)
+    seg = seg.assign(conductor=[remap[c] for c in seg["conductor"]])
+    cr = lines["crossings"]
+    if len(cr):
+        ids = [[int(v) for v in str(c).split(",") if v != ""] for c in cr["conductors"]]
+        ok = [all(i in remap for i in row) for row in ids]
+        cr = cr[ok].reset_index(drop=True)
+        cr = cr.assign(conductors=[",".join(str(remap[i]) for i in row) for row, k in zip(ids, ok) if k])
+    for g, src in ((new_cond, cond), (seg, lines["conductor_segments"]), (cr, lines["crossings"])):
+        g.attrs.update(src.attrs)
+    return {"conductors": new_cond, "conductor_segments": seg, "crossings": cr}
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     from toolbox_plugins.hough_lines.plugin import PARAMETERS as HOUGH  # noqa: F401  (same package family)
@@ -159,6 +191,9 @@ def toolbox_algorithms():
             Parameter("cell_size_m", float, 0.5, "top-hat mask cell", unit="m", minimum=0.01, maximum=10.0),
             Parameter("max_points_per_cell", int, 45, "top-hat: denser cells are dropped", unit="points", minimum=1),
             *HOUGH[:-1],
+            Parameter("validate_3d", bool, True, "keep only conductors that are wires in 3D (a catenary span of at "
+                      "least S_min with a small residual and gentle slope)"),
+            Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
         ],
         inputs=[Input("points", "points", "raw LAS/LAZ point cloud")],
         outputs=[
