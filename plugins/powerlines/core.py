@@ -42,7 +42,7 @@ def sample_grid(data: np.ndarray, transform, x, y) -> np.ndarray:
 
 
 def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
-                  surface_density: float | None = None):
+                  surface_density: float | None = None, max_axis_slope: float = 0.7):
     """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.
 
     Roofs and crowns are surfaces *as dense as the survey's*: with ``surface_density`` (points per
@@ -56,8 +56,10 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     _, idx = tree.query(xyz, k=k, workers=-1)
     nb = xyz[idx.reshape(n, k)]
     centred = nb - nb.mean(axis=1, keepdims=True)
-    ev = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", centred, centred) / k)
+    ev, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred) / k)
     share = ev / (ev.sum(axis=1, keepdims=True) + 1e-12)
+    # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
+    steep = np.abs(vec[:, 2, 2]) > max_axis_slope / np.hypot(1.0, max_axis_slope)
     rugged = share[:, 0] >= rugged_share
     planar = ~rugged & (share[:, 1] >= planar_share)
     if surface_density is not None:
@@ -68,7 +70,7 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
             if len(p):
                 counts = tree.query_ball_point(xyz[p], 1.0, return_length=True, workers=-1)
                 mask[p] = counts >= 0.5 * np.pi * surface_density
-    linear = ~rugged & ~planar
+    linear = ~rugged & ~planar & ~steep
     # edges of roofs (and of crowns) are locally linear: a wire never touches a surface
     for surface, reach in ((planar, 1.0), (rugged, 0.5)):
         if surface.any() and linear.any():
@@ -91,6 +93,8 @@ class Span:
     rms: float
     n_points: int
     sag: float
+    offset: float = 0.0  # the wire's lateral offset from the 2D line at s = 0 (side-by-side conductors)
+    offset_slope: float = 0.0  # its change per unit along the line (wires not quite parallel to it)
 
 
 def catenary(s, z0, s0, c):
@@ -120,7 +124,10 @@ def fit_catenary(s, z):
     sol = least_squares(res, [z00, s00, np.log(c0)], loss="soft_l1", f_scale=0.1)
     z0, s0, lc = sol.x
     r = res(sol.x)
-    return float(z0), float(s0), float(np.exp(lc)), float(np.sqrt(np.mean(r * r)))
+    # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit
+    mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    inl = np.abs(r) <= max(3 * mad, 0.15)
+    return float(z0), float(s0), float(np.exp(lc)), float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else np.inf
 
 
 def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02):
@@ -158,7 +165,7 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
-                  min_points: int = 20):
+                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.12):
     """Wires and their catenary spans along each 2D line.
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points. Returns
@@ -167,49 +174,111 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     tree = cKDTree(np.column_stack([px, py]))
     spans: list[Span] = []
     members = {}
+    # each point belongs to the nearest 2D line (bands of neighbouring lines overlap)
+    owner = np.full(len(px), -1)
+    best = np.full(len(px), np.inf)
+    for li, (anchor, direction, t0, t1) in enumerate(lines):
+        normal = np.array([-direction[1], direction[0]])
+        d = np.abs((px - anchor[0]) * normal[0] + (py - anchor[1]) * normal[1])
+        closer = d < best
+        owner[closer], best[closer] = li, d[closer]
     for li, (anchor, direction, t0, t1) in enumerate(lines):
         normal = np.array([-direction[1], direction[0]])
         mid = anchor + direction * (t0 + t1) / 2
         half = (t1 - t0) / 2 + band
         cand = np.asarray(tree.query_ball_point(mid, np.hypot(half, band)), dtype=np.int64)
+        cand = cand[owner[cand] == li]
         if len(cand) == 0:
             continue
         d = np.column_stack([px[cand], py[cand]]) - anchor
         off = d @ normal
         s = d @ direction
         near = (np.abs(off) <= band) & (s >= t0 - band) & (s <= t1 + band)
-        cand, s = cand[near], s[near]
+        cand, s, off = cand[near], s[near], off[near]
         if len(cand) < min_points:
             continue
         z = pz[cand]
-        # height and continuity: link points close along the line and in height
-        scaled = np.column_stack([s / s_link, z / z_link])
+        # height, continuity and lateral position: link points close along the line, in height and
+        # across it (conductors side by side 0.25 m apart at similar heights come apart too)
+        scaled = np.column_stack([s / s_link, z / z_link, off / off_link])
         pairs = cKDTree(scaled).query_pairs(1.0, output_type="ndarray")
         g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
             if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))
         _, lab = connected_components(g, directed=False)
+        lab = _split_bundles(s, off, lab, min_points)
         wire_of = _chain_pieces(s, z, lab, min_points, gap_max=4 * s_link, z_tol=z_link)
         for k in range(lab.max() + 1):
             m = lab == k
             if wire_of[k] < 0 or s[m].max() - s[m].min() < min_span:
                 continue
             wire = int(wire_of[k])
-            sk, zk, ik = s[m], z[m], cand[m]
+            sk, zk, ik, ok_ = s[m], z[m], cand[m], off[m]
+            pieces = [(sk.min(), sk.max() + 1e-9)]
             cuts = split_spans(sk, zk, min_span)
-            bounds = [sk.min()] + cuts + [sk.max() + 1e-9]
-            for j in range(len(bounds) - 1):
-                sel = (sk >= bounds[j]) & (sk < bounds[j + 1])
+            if cuts:
+                pieces = list(zip([sk.min()] + cuts, cuts + [sk.max() + 1e-9]))
+            j = -1
+            while pieces:
+                lo_s, hi_s = pieces.pop(0)
+                sel = (sk >= lo_s) & (sk < hi_s)
                 if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_span:
                     continue
                 z0, s0, c, rms = fit_catenary(sk[sel], zk[sel])
+                if rms > max_rms:
+                    # one catenary does not fit: look again for an attachment point, more sensitively
+                    finer = split_spans(sk[sel], zk[sel], min_span, min_drop=0.005)
+                    if not finer:  # no slope evidence (points missing at the pole): the widest gap
+                        ss_ = np.sort(sk[sel])
+                        gaps = np.diff(ss_)
+                        ok = (ss_[:-1] - ss_[0] >= min_span) & (ss_[-1] - ss_[1:] >= min_span) & (gaps >= 1.0)
+                        if ok.any():
+                            g = int(np.argmax(np.where(ok, gaps, -1)))
+                            finer = [float(ss_[g] + gaps[g] / 2)]
+                    if finer:
+                        edges = [lo_s] + finer + [hi_s]
+                        pieces = list(zip(edges[:-1], edges[1:])) + pieces
+                        continue
+                j += 1
                 a, b = float(sk[sel].min()), float(sk[sel].max())
                 ss = np.linspace(a, b, 200)
                 chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
                 sag = float(np.max(chord - catenary(ss, z0, s0, c)))
-                spans.append(Span(li, wire, j, s0, c, z0, a, b, rms, int(sel.sum()), sag))
-                for i in ik[sel]:
-                    members[int(i)] = (li, wire)
+                o1, o0 = np.polyfit(sk[sel], ok_[sel], 1) if sel.sum() >= 3 else (0.0, float(np.median(ok_[sel])))
+                spans.append(Span(li, wire, j, s0, c, z0, a, b, rms, int(sel.sum()), sag, float(o0), float(o1)))
+                if rms <= max_rms:  # points of a span that is not a wire are not wire points
+                    resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
+                    for i in ik[sel][resid <= max(3 * rms, 0.15)]:
+                        members[int(i)] = (li, wire)
     return spans, members
+
+
+def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:
+    """Sub-conductors of a bundle hang side by side at one height, closer than their scatter can
+    keep apart in a neighbour graph: split a piece in two where its lateral residual (after a
+    straight trend along the line) is clearly bimodal (two-means, centres ≥ ``min_gap`` apart
+    and ≥ 4 pooled standard deviations)."""
+    lab = lab.copy()
+    for _ in range(depth):
+        nxt = lab.max() + 1
+        for k in range(lab.max() + 1):
+            m = np.flatnonzero(lab == k)
+            if len(m) < 2 * min_points:
+                continue
+            trend = np.polyval(np.polyfit(s[m], off[m], 1), s[m])
+            r = off[m] - trend
+            c = np.array([np.percentile(r, 25), np.percentile(r, 75)])
+            for _ in range(20):
+                side = np.abs(r - c[0]) > np.abs(r - c[1])
+                if side.all() or (~side).all():
+                    break
+                c = np.array([r[~side].mean(), r[side].mean()])
+            if side.all() or (~side).all() or min(side.sum(), (~side).sum()) < min_points:
+                continue
+            sd = np.sqrt((r[~side].var() * (~side).sum() + r[side].var() * side.sum()) / len(r))
+            if abs(c[1] - c[0]) >= max(min_gap, 4 * sd):
+                lab[m[side]] = nxt
+                nxt += 1
+    return lab
 
 
 def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float) -> np.ndarray:

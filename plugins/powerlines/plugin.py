@@ -81,8 +81,9 @@ def _run(inputs, params, ctx):
         d = np.array([bx - ax, by - ay]) * hu
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
-    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_m"],
-                                   z_link=1.0, s_link=2 * params["v_max_m"], min_span=params["s_min_m"])
+    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"],
+                                   z_link=1.0, s_link=2 * params["v_max_m"], min_span=params["s_min_m"],
+                                   max_rms=params["max_rms_3d_m"])
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
     # and hangs gently (pylon members and roof edges are straight in plan but not wires)
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and
@@ -119,10 +120,12 @@ def _run(inputs, params, ctx):
         from .core import catenary
 
         zz = catenary(ss, sp.z0, sp.s0, sp.c)
-        xy = a[None, :] + ss[:, None] * dvec[None, :]
+        normal = np.array([-dvec[1], dvec[0]])
+        xy = a[None, :] + ss[:, None] * dvec[None, :] + (sp.offset + sp.offset_slope * ss)[:, None] * normal[None, :]
         geoms.append(LineString(np.column_stack([xy[:, 0] / hu, xy[:, 1] / hu, zz / vu])))
         rows.append({"conductor": sp.conductor, "wire": sp.wire, "span": sp.span, "sag_m": sp.sag,
                      "catenary_c_m": sp.c, "rms_m": sp.rms, "n_points": sp.n_points,
+                     "offset_m": sp.offset + sp.offset_slope * (sp.s_from + sp.s_to) / 2,
                      "length_m": sp.s_to - sp.s_from})
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
@@ -163,8 +166,6 @@ def _select_conductors(lines: dict, keep: list) -> dict:
 
 @toolbox.hookimpl
 def toolbox_algorithms():
-    from toolbox_plugins.hough_lines.plugin import PARAMETERS as HOUGH  # noqa: F401  (same package family)
-
     return [Algorithm(
         id="powerlines", title="Power-line conductors from a raw point cloud", run=_run,
         description=(
@@ -190,10 +191,29 @@ def toolbox_algorithms():
                       minimum=0.0, maximum=0.5),
             Parameter("cell_size_m", float, 0.5, "top-hat mask cell", unit="m", minimum=0.01, maximum=10.0),
             Parameter("max_points_per_cell", int, 45, "top-hat: denser cells are dropped", unit="points", minimum=1),
-            *HOUGH[:-1],
+            # the Hough stage's parameters (passed on to the hough-lines algorithm), the method's values
+            Parameter("theta_step_deg", float, 0.1, "θ resolution of the accumulator", unit="deg", minimum=0.001,
+                      maximum=10.0),
+            Parameter("rho_step_m", float, 0.1, "ρ resolution", unit="m", minimum=0.001, maximum=10.0),
+            Parameter("band_m", float, 0.4, "half-width of the band subtracted after each peak", unit="m",
+                      minimum=0.0, maximum=50.0),
+            Parameter("min_votes", int, 15, "stop below this many votes", unit="votes", minimum=2),
+            Parameter("s_min_m", float, 8.0, "S_min: shortest run of a conductor", unit="m", minimum=0.0),
+            Parameter("v_max_m", float, 2.5, "V_max: largest gap within a run", unit="m", minimum=0.01),
+            Parameter("tile_size_m", float, 100.0, "Hough tile size", unit="m", minimum=0.0, maximum=100000.0),
+            Parameter("overlap_m", float, 10.0, "tile overlap", unit="m", minimum=0.0, maximum=1000.0),
+            Parameter("merge_gap_m", float, 100.0, "collinear pieces this close are one conductor", unit="m",
+                      minimum=0.0),
+            Parameter("fit_points", str, "band", "points of the refit: band (±band_m) or inverse (the paper)",
+                      choices=("band", "inverse")),
+            Parameter("crossing_validation", str, "extent", "crossings confirmed by conductor extents or (the "
+                      "paper) by validated segments", choices=("extent", "segments")),
             Parameter("validate_3d", bool, True, "keep only conductors that are wires in 3D (a catenary span of at "
                       "least S_min with a small residual and gentle slope)"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
+            Parameter("band_3d_m", float, 1.0, "half-width of the band around a 2D line whose points the 3D step "
+                      "splits into wires by height (conductors side by side at other heights are caught too)",
+                      unit="m", minimum=0.05, maximum=10.0),
         ],
         inputs=[Input("points", "points", "raw LAS/LAZ point cloud")],
         outputs=[
