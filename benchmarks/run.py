@@ -3,7 +3,8 @@
 Prints a table: case, points, our seconds, each peer's seconds, ratio (peer / ours, > 1 means we
 are faster), and the accuracy of each where the input has truth. Results also go to
 bench-output/results.json. Peers (benchmark extras, never runtime dependencies):
-whitebox-workflows (improved ground point filter, hillshade) and cloth-simulation-filter (CSF).
+whitebox-workflows (improved ground point filter, hillshade), cloth-simulation-filter (CSF) and
+scikit-image (Hough lines).
 
     python benchmarks/run.py [--quick] [--no-10m]
 """
@@ -169,6 +170,63 @@ def bench_hillshade(tmp: Path) -> list[dict]:
     return rows
 
 
+def bench_hough(tmp: Path) -> list[dict]:
+    """Votes per second of the accumulator: taichi kernel, its numpy reference, and scikit-image's
+    hough_line on a rasterised copy of the same points (0.1 m pixels = the ρ step, same θ step)."""
+    from toolbox import kernels
+    from toolbox_plugins.hough_lines import core, reference
+    from toolbox_plugins.hough_lines import kernels as hk
+
+    rng = np.random.default_rng(0)
+    # 20 000 points of a 100 m tile: six conductors and clutter, like a top-hat output
+    t = rng.uniform(0, 100, 18000)
+    k = rng.integers(0, 6, 18000)
+    x = np.r_[t, rng.uniform(0, 100, 2000)]
+    y = np.r_[20 + 0.6 * k + 0.1 * t + rng.normal(0, 0.04, 18000), rng.uniform(0, 100, 2000)]
+    thetas, k_min, rows = core.accumulator_shape(x, y, 0.1, 0.1)
+    c, s = np.cos(thetas), np.sin(thetas)
+    votes = len(x) * len(thetas)
+    ti = kernels.taichi()
+    acc = np.zeros((len(thetas), rows), np.int32)
+    hk.accumulate(ti, x[:10], y[:10], c, s, k_min, 10.0, acc, 1)  # compile once (cached on disk after)
+    acc[:] = 0
+    t_ti = min(timed(lambda: hk.accumulate(ti, x, y, c, s, k_min, 10.0, acc, 1))[0] for _ in range(3))
+    acc2 = np.zeros_like(acc)
+    t_np, _ = timed(lambda: reference.accumulate(x, y, c, s, k_min, 10.0, acc2, 1))
+    row = {"case": f"hough accumulator {len(x):,} pts x {len(thetas)} θ", "points": len(x), "ours_s": t_ti,
+           "whitebox_s": None, "csf_s": None, "votes_per_s_taichi": votes / t_ti, "votes_per_s_numpy": votes / t_np,
+           "numpy_s": t_np, "arch": kernels.arch_used()}
+    try:
+        from skimage.transform import hough_line
+
+        img = np.zeros((1001, 1001), bool)
+        img[np.clip((y / 0.1).astype(int), 0, 1000), np.clip((x / 0.1).astype(int), 0, 1000)] = True
+        t_sk, _ = timed(lambda: hough_line(img, theta=thetas))
+        row["skimage_s"] = t_sk
+        row["votes_per_s_skimage"] = int(img.sum()) * len(thetas) / t_sk
+    except ImportError:
+        row["skimage_s"] = None
+    print(f"{row['case']:<44} taichi ({row['arch']}) {row['votes_per_s_taichi'] / 1e6:8.1f} Mvotes/s | numpy "
+          f"{row['votes_per_s_numpy'] / 1e6:6.1f} Mvotes/s (x{row['votes_per_s_taichi'] / row['votes_per_s_numpy']:.1f}) | "
+          + (f"scikit-image {row['votes_per_s_skimage'] / 1e6:6.1f} Mvotes/s "
+             f"(x{row['votes_per_s_taichi'] / row['votes_per_s_skimage']:.1f})" if row.get("skimage_s") else "scikit-image absent"),
+          flush=True)
+    return [row]
+
+
+def bench_powerlines(tmp: Path) -> list[dict]:
+    path = tmp / "corridor.laz"
+    if not path.exists():
+        toolbox.run("synthetic-scene", output=path, overwrite=True, kind="corridor", seed=1)
+    n = laspy.open(path).header.point_count
+    t, rep = timed(lambda: toolbox.run("powerlines", path, tmp / "pl.gpkg", overwrite=True))
+    row = {"case": "powerlines end to end, synthetic corridor", "points": n, "ours_s": t, "whitebox_s": None,
+           "csf_s": None, "s_per_million": t / n * 1e6, "stages_s": {k: v for k, v in rep["stats"].items() if k.endswith("_s")}}
+    print_row(row)
+    print(f"  {row['s_per_million']:.2f} s per million points; stages: {row['stages_s']}")
+    return [row]
+
+
 def fmt(v, w=8, d=2):
     return f"{v:{w}.{d}f}" if isinstance(v, (int, float)) and v is not None else f"{'-':>{w}}"
 
@@ -202,6 +260,8 @@ def main(argv=None) -> int:
         tmp = Path(d)
         rows += bench_ground(tmp, not args.no_10m, args.quick)
         rows += bench_hillshade(tmp)
+        rows += bench_hough(tmp)
+        rows += bench_powerlines(tmp)
     (out_dir / "results.json").write_text(json.dumps(rows, indent=2))
     print(f"results in {out_dir / 'results.json'}")
     return 0

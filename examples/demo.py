@@ -32,13 +32,15 @@ def step(name, fn, report):
     return out
 
 
-def draw(hs_path: Path, classified: Path, out_png: Path):
+def draw(hs_path: Path, classified: Path, out_png: Path, wires: Path | None = None):
     hs = read_raster(hs_path)
     base = hs.data.astype(np.float32)
     t = hs.transform
     rgb = np.repeat(base[..., None], 3, axis=2) * 0.9 + 20
     las = laspy.read(classified)
-    x, y, z, c = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z), np.asarray(las.classification)
+    x, y, z, c = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z), np.asarray(las.classification).copy()
+    if wires is not None:  # the conductors found by `powerlines` drawn as wires (class 14)
+        c[np.asarray(laspy.read(wires).classification) == 14] = 14
     col = ((x - t.c) / t.a).astype(int).clip(0, base.shape[1] - 1)
     row = ((t.f - y) / -t.e).astype(int).clip(0, base.shape[0] - 1)
     order = np.argsort(z)  # highest point per cell drawn last
@@ -101,15 +103,43 @@ def main(argv=None) -> int:
             100 * float(np.mean(pred[np.isin(truth_cls, [3, 4, 5])] == truth_cls[np.isin(truth_cls, [3, 4, 5])])), 2)
         summary["building precision"] = round(float((b & pb).sum() / max(pb.sum(), 1)), 3)
         summary["building recall"] = round(float((b & pb).sum() / max(b.sum(), 1)), 3)
-    # anything else installed that takes a point cloud runs with its defaults
-    for aid, alg in algs.items():
-        if aid in report["algorithms_run"] or len(alg.inputs) != 1 or alg.inputs[0].kind != "points":
-            continue
-        target = out / f"{aid}{alg.outputs[0].extension}"
-        step(aid, lambda aid=aid, target=target: toolbox.run(aid, scene, target, overwrite=True), report)
-        report["algorithms_run"].append(aid)
+    if "powerlines" in algs:
+        rep = step("powerlines", lambda: toolbox.run("powerlines", scene, out / "powerlines.gpkg", overwrite=True,
+                                                    outputs={"classified": str(out / "powerlines_wires.laz")}), report)
+        report["algorithms_run"].append("powerlines")
+        import geopandas as gpd
+
+        cond = gpd.read_file(out / "powerlines.gpkg", layer="conductors")
+        cross = gpd.read_file(out / "powerlines.gpkg", layer="crossings")
+        found = 0
+        for t in truth["conductor_lines_2d"]:
+            a, b = np.array(t["a"]), np.array(t["b"])
+            td = (b - a) / np.linalg.norm(b - a)
+            for g in cond.geometry:
+                (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+                d = np.array([bx - ax, by - ay]) / g.length
+                if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                    found += 1
+                    break
+        errs = [float(np.min(np.hypot(cross.geometry.x - c["x"], cross.geometry.y - c["y"]))) if len(cross) else np.inf
+                for c in truth["crossings"]]
+        wires = np.asarray(laspy.read(out / "powerlines_wires.laz").classification) == 14
+        tw = truth_cls == 14
+        summary["conductors found (2D lines)"] = f"{found}/{len(truth['conductor_lines_2d'])} (+{len(cond) - found} false)"
+        summary["wires in 3D"] = f"{rep['stats']['n_wires_3d']} (truth {len(truth['wires'])})"
+        summary["crossings found"] = f"{sum(e <= 0.05 for e in errs)}/{len(errs)}"
+        summary["crossing error max m"] = round(max(errs), 3) if errs else None
+        summary["wire points precision / recall"] = (f"{(wires & tw).sum() / max(wires.sum(), 1):.3f} / "
+                                                     f"{(wires & tw).sum() / max(tw.sum(), 1):.3f}")
+        summary["powerlines s per million points"] = round(rep["timings_s"]["total"] / len(truth_cls) * 1e6, 2)
+    if "powerlines" in report["algorithms_run"]:  # its stages ran through the host
+        report["algorithms_run"] += [a for a in ("tophat", "hough-lines") if a in algs]
+    missing = sorted(set(algs) - set(report["algorithms_run"]) - {"tophat-raster"})
+    if missing:
+        print(f"  (not part of the demo chain: {', '.join(missing)})")
     if (out / "hillshade.tif").exists() and (out / "classified.laz").exists():
-        draw(out / "hillshade.tif", out / "classified.laz", out / "overview.png")
+        draw(out / "hillshade.tif", out / "classified.laz", out / "overview.png",
+             out / "powerlines_wires.laz" if (out / "powerlines_wires.laz").exists() else None)
     report["found_vs_truth"] = summary
     (out / "demo_report.json").write_text(json.dumps(report, indent=2))
     print("found versus truth:")

@@ -41,7 +41,7 @@ def test_taichi_accumulator_equals_numpy_reference(n, seed):
     y = rng.uniform(0, 110, n)
     thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
     c, s = np.cos(thetas), np.sin(thetas)
-    a = np.zeros((rows, len(thetas)), np.int32)
+    a = np.zeros((len(thetas), rows), np.int32)
     b = np.zeros_like(a)
     reference.accumulate(x, y, c, s, k_min, 10.0, a, 1)
     hough_kernels.accumulate(kernels.taichi(), x, y, c, s, k_min, 10.0, b, 1)

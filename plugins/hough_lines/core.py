@@ -92,19 +92,21 @@ def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: f
             f"(limit {max_accumulator_bytes / 2**30:.1f} GiB)")
     cos_t, sin_t = np.cos(thetas), np.sin(thetas)
     inv = 1.0 / rho_step_m
-    acc = np.zeros((rows, len(thetas)), np.int32)
+    # stored θ-major (a row per θ, a column per ρ: the method's H transposed) so that each θ's
+    # votes are contiguous and one kernel thread owns them
+    acc = np.zeros((len(thetas), rows), np.int32)
     accumulate(x, y, cos_t, sin_t, k_min, inv, acc, 1)
     active = np.ones(len(x), bool)
     lines: list[HoughLine] = []
     for _ in range(max_lines * 4):
         peak = int(np.argmax(acc))
-        r, c = divmod(peak, acc.shape[1])
-        votes = int(acc[r, c])
+        c, r = divmod(peak, acc.shape[1])  # c: θ index, r: ρ bin
+        votes = int(acc[c, r])
         if votes < min_votes:
             break
         rho_p = (r + k_min) * rho_step_m
         rho_pts = x * cos_t[c] + y * sin_t[c]
-        k_pts = np.floor(rho_pts * inv + 0.5).astype(np.int64) - k_min
+        k_pts = (rho_pts * inv + (0.5 - k_min)).astype(np.int64)  # as the accumulator bins them
         inverse = np.flatnonzero(active & (k_pts == r))
         band = np.flatnonzero(active & (np.abs(rho_pts - rho_p) <= band_m))
         # along-line positions: t = -x sinθ + y cosθ
@@ -124,7 +126,7 @@ def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: f
                                    (float(tt.min()), float(tt.max()))))
         # subtract the band's votes (also for a rejected peak, so that the next one comes up)
         if len(band) == 0:
-            acc[r, c] = 0  # numerically isolated cell: clear it
+            acc[c, r] = 0  # numerically isolated cell: clear it
             continue
         accumulate(x[band], y[band], cos_t, sin_t, k_min, inv, acc, -1)
         active[band] = False

@@ -1,5 +1,5 @@
-"""Taichi kernels of the 2D Hough transform: voting into the (ρ, θ) accumulator and subtracting a
-band's votes. One thread per (point, θ) pair, atomic adds. ``reference.py`` is the numpy twin."""
+"""Taichi kernels of the 2D Hough transform: voting into the (θ, ρ) accumulator and subtracting a
+band's votes. One thread per θ owning its row (no atomics). ``reference.py`` is the numpy twin."""
 
 
 import numpy as np
@@ -12,10 +12,15 @@ def _build(ti):
     def vote(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
              cos_t: ti.types.ndarray(dtype=ti.f64, ndim=1), sin_t: ti.types.ndarray(dtype=ti.f64, ndim=1),
              k_min: ti.i64, inv_drho: ti.f64, acc: ti.types.ndarray(dtype=ti.i32, ndim=2), sign: ti.i32):
-        for i, j in ti.ndrange(x.shape[0], cos_t.shape[0]):
-            rho = x[i] * cos_t[j] + y[i] * sin_t[j]
-            k = ti.cast(ti.floor(rho * inv_drho + 0.5), ti.i64) - k_min
-            ti.atomic_add(acc[k, j], sign)
+        # one thread per θ owns its accumulator row: no atomics, contiguous writes
+        # bin = trunc(ρ/Δρ + (0.5 - k_min)): the argument is positive, so truncation is the floor
+        off = 0.5 - ti.cast(k_min, ti.f64)
+        for j in range(cos_t.shape[0]):
+            c = cos_t[j]
+            s = sin_t[j]
+            for i in range(x.shape[0]):
+                k = ti.cast((x[i] * c + y[i] * s) * inv_drho + off, ti.i32)
+                acc[j, k] += sign
 
     return vote
 
