@@ -287,29 +287,11 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
             tot["xz"] += blk["xz"] + ox * sz
             tot["yz"] += blk["yz"] + oy * sz
     n_ = tot["n"]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # centred normal equations for z = a + b*dx + c*dy, solved for a (value at the centre)
-        mx, my, mz = tot["x"] / n_, tot["y"] / n_, tot["z"] / n_
-        cxx = tot["xx"] / n_ - mx * mx
-        cyy = tot["yy"] / n_ - my * my
-        cxy = tot["xy"] / n_ - mx * my
-        cxz = tot["xz"] / n_ - mx * mz
-        cyz = tot["yz"] / n_ - my * mz
-        det = cxx * cyy - cxy * cxy
-        b = (cxz * cyy - cyz * cxy) / det
-        cc = (cyz * cxx - cxz * cxy) / det
-        a = mz - b * mx - cc * my
-        # the same fit on the cell's own points: sharper in ditches and at breaklines, used where
-        # the cell holds enough well-spread points
-        n0 = S["n"]
-        mx0, my0, mz0 = S["x"] / n0, S["y"] / n0, S["z"] / n0
-        cxx0 = S["xx"] / n0 - mx0 * mx0
-        cyy0 = S["yy"] / n0 - my0 * my0
-        cxy0 = S["xy"] / n0 - mx0 * my0
-        cxz0 = S["xz"] / n0 - mx0 * mz0
-        cyz0 = S["yz"] / n0 - my0 * mz0
-        det0 = cxx0 * cyy0 - cxy0 * cxy0
-        a0 = mz0 - (cxz0 * cyy0 - cyz0 * cxy0) / det0 * mx0 - (cyz0 * cxx0 - cxz0 * cxy0) / det0 * my0
+    a, det = _plane_value_at_centre(tot)
+    # the same fit on the cell's own points: sharper in ditches and at breaklines, used where the
+    # cell holds enough well-spread points
+    n0 = S["n"]
+    a0, det0 = _plane_value_at_centre(S)
     own = S["n"] > 0
     good = (n_ >= max(min_points, 3)) & (det > (0.05 * cell * cell) ** 2) & np.isfinite(a)
     own_good = (n0 >= 6) & (det0 > (0.15 * cell * cell) ** 2) & np.isfinite(a0)
@@ -330,6 +312,23 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
     value = np.where(np.isfinite(value) & np.isfinite(mean3), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
     return fill_holes(value, known), known
+
+
+def _plane_value_at_centre(m: dict):
+    """Least-squares plane z = a + b·dx + c·dy from moment grids (sums of 1, x, y, z, xx, yy, xy,
+    xz, yz about the cell centre): returns (a, the determinant of the centred xy covariance)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = m["n"]
+        mx, my, mz = m["x"] / n, m["y"] / n, m["z"] / n
+        cxx = m["xx"] / n - mx * mx
+        cyy = m["yy"] / n - my * my
+        cxy = m["xy"] / n - mx * my
+        cxz = m["xz"] / n - mx * mz
+        cyz = m["yz"] / n - my * mz
+        det = cxx * cyy - cxy * cxy
+        b = (cxz * cyy - cyz * cxy) / det
+        c = (cyz * cxx - cxz * cxy) / det
+        return mz - b * mx - c * my, det
 
 
 def hillshade(dem: np.ndarray, ewres: float, nsres: float, azimuth_deg: float = 315.0, altitude_deg: float = 45.0,

@@ -57,6 +57,19 @@ def _max_cells() -> int:
     return int(min(MAX_CELLS, 0.5 * total / BYTES_PER_CELL))
 
 
+def _ground_and_noise(pc, params):
+    """Ground and noise masks: from the morphological filter, or the file's classes 2 and 7."""
+    import numpy as np
+
+    if params["ground"] == "file":
+        cls0 = pc.classification
+        if cls0 is None or not np.any(cls0 == 2):
+            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
+        return cls0 == 2, cls0 == 7
+    gr, _ = _ground(pc, params)
+    return gr.ground, gr.noise
+
+
 def _check_grid(pc, cell, name):
     w, s, e, n = pc.bounds()
     cells = ((e - w) / cell + 3) * ((n - s) / cell + 3)
@@ -134,14 +147,7 @@ def _run_dtm(inputs, params, ctx):
     pc = inputs["points"]
     _check_grids(pc, params)
     t0 = time.perf_counter()
-    if params["ground"] == "file":
-        cls0 = pc.classification
-        if cls0 is None or not np.any(cls0 == 2):
-            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
-        ground, noise = cls0 == 2, cls0 == 7
-    else:
-        gr, _ = _ground(pc, params)
-        ground, noise = gr.ground, gr.noise
+    ground, noise = _ground_and_noise(pc, params)
     t1 = time.perf_counter()
     dtm, _ = _dtm_raster(pc, ground, params["resolution_m"])
     t2 = time.perf_counter()
@@ -183,15 +189,7 @@ def _run_classify(inputs, params, ctx):
 
     pc = inputs["points"]
     _check_grids(pc, params)
-    if params["ground"] == "file":
-        cls0 = pc.classification
-        if cls0 is None or not np.any(cls0 == 2):
-            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
-        ground, noise = cls0 == 2, cls0 == 7
-    else:
-        gp = {p.name: params[p.name] for p in GROUND_PARAMETERS}
-        gr, _ = _ground(pc, gp)
-        ground, noise = gr.ground, gr.noise
+    ground, noise = _ground_and_noise(pc, params)
     dtm, grid = _dtm_raster(pc, ground, params["resolution_m"])
     surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
     h = pc.z - bilinear(grid, surface, pc.x, pc.y)
