@@ -220,3 +220,32 @@ def test_tophat_and_hough_through_the_cli(corridor, tmp_path, cli):
     con = sqlite3.connect(tmp_path / "h.gpkg")
     styled = {row[0] for row in con.execute("SELECT f_table_name FROM layer_styles WHERE useAsDefault = 1")}
     assert styled == {"conductors", "conductor_segments", "crossings"}
+
+
+def test_hough_lines_on_a_binary_raster_finds_the_edges_of_a_building(tmp_path):
+    """The roof method's edge image: a rotated rectangle's mask minus its erosion; its four sides."""
+    from affine import Affine
+    from scipy import ndimage
+
+    from toolbox.io.points import parse_crs
+    from toolbox.io.rasters import Raster, write_raster
+
+    yy, xx = np.mgrid[0:200, 0:200] * 0.25
+    a = np.radians(20.0)
+    u = (xx - 25) * np.cos(a) + (yy - 25) * np.sin(a)
+    v = -(xx - 25) * np.sin(a) + (yy - 25) * np.cos(a)
+    mask = (np.abs(u) <= 15) & (np.abs(v) <= 9)
+    edges = mask & ~ndimage.binary_erosion(mask)
+    write_raster(Raster(edges.astype(np.uint8), Affine(0.25, 0, 500000, 0, -0.25, 5400050), crs=parse_crs("EPSG:25832"),
+                        nodata=None), tmp_path / "edges.tif")
+    rep = toolbox.run("hough-lines-raster", tmp_path / "edges.tif", tmp_path / "e.gpkg", rho_step_m=0.25, band_m=0.5,
+                      v_max_m=1.0, tile_size_m=0)
+    lines = gpd.read_file(tmp_path / "e.gpkg", layer="conductors")
+    assert len(lines) == 4, rep["stats"]
+    az = sorted(lines.azimuth_deg.round() % 90)
+    # rotated by 20 degrees in image rows (y down), i.e. -20 degrees from east in the world:
+    # azimuths 110 and 20, both 20 modulo 90
+    assert np.allclose(az, [20, 20, 20, 20], atol=1.0)
+    lengths = sorted(lines.length_m)
+    assert lengths[0] == pytest.approx(18, abs=1.0) and lengths[-1] == pytest.approx(30, abs=1.0)
+    assert len(gpd.read_file(tmp_path / "e.gpkg", layer="crossings")) == 4  # the corners

@@ -111,9 +111,42 @@ def _run(inputs, params, ctx):
                                                  "n_crossings": len(cross)})
 
 
+def _run_raster(inputs, params, ctx):
+    """Cells above the threshold of a (binary) raster vote as points at their centres."""
+    import numpy as np
+
+    from toolbox import DataError
+
+    r = inputs["image"]
+    t = r.transform
+    if t.b != 0 or t.d != 0:
+        raise DataError(f"input {r.source!r} is rotated; warp it to a north-up grid first")
+    band = r.bands()[0]
+    on = r.valid_mask() & (band > params["threshold"])
+    rows, cols = np.nonzero(on)
+    if len(rows) < 2:
+        raise DataError(f"input {r.source!r} has {len(rows)} cells above {params['threshold']}; nothing to detect")
+    x = t.c + (cols + 0.5) * t.a
+    y = t.f + (rows + 0.5) * t.e
+    p = dict(params)
+    conductors = detect(ctx, x, y, p)
+    out, cross = layers(conductors, x, y, r.crs, validation=params["crossing_validation"])
+    return toolbox.Result({"lines": out}, stats={"n_cells": int(len(x)), "n_lines": len(conductors),
+                                                 "n_crossings": len(cross)})
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     return [Algorithm(
+        id="hough-lines-raster", title="2D Hough lines on a binary raster (e.g. roof edges)", run=_run_raster,
+        description=("The same detection on the cells of a raster above a threshold (each votes at its centre), "
+                     "e.g. the building-edge image of the roof method (mask minus its erosion). Lengths are in the "
+                     "raster's units; give rho_step_m and band_m about one cell."),
+        reference=REFERENCE + "; Borowiec, Hough transform as a tool supporting building roof detection (METHODS.md §3)",
+        parameters=[Parameter("threshold", float, 0.0, "cells above this value vote"), *PARAMETERS],
+        inputs=[Input("image", "raster", "a binary (or thresholded) GeoTIFF")],
+        outputs=[Output("lines", "vector", "layers conductors (the lines), conductor_segments, crossings")],
+    ), Algorithm(
         id="hough-lines", title="2D Hough lines (conductors) with crossings", run=_run,
         description=("2D Hough transform on the points' x, y (taichi accumulator): peaks taken one at a time, "
                      "validated by a run of points with gaps < V_max spanning ≥ S_min, the band's votes subtracted; "
