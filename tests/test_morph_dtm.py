@@ -247,3 +247,29 @@ def test_batch_of_tiles_in_parallel(terrain_scene, tmp_path, cli):
     assert rep["n_done"] == 3 and rep["n_failed"] == 1 and "broken.laz" in rep["failed"][0]["input"]
     assert sorted(p.name for p in out.glob("*.tif")) == ["tile0.tif", "tile1.tif", "tile2.tif"]
     assert sorted(p.name for p in out.glob("*.laz")) == ["tile0_classified.laz", "tile1_classified.laz", "tile2_classified.laz"]
+
+
+def test_dtm_kernels_match_their_numpy_references():
+    from toolbox import kernels
+    from toolbox_plugins.morph_dtm.kernels import TaichiAccel
+
+    acc = TaichiAccel(kernels.taichi())
+    rng = np.random.default_rng(3)
+    x = rng.uniform(1000, 1100, 200_000)
+    y = rng.uniform(2000, 2080, 200_000)
+    z = 300 + 0.3 * x - 0.1 * y + rng.normal(0, 0.2, len(x))
+    grid = core.Grid.around(x, y, 1.5)
+    ref = core.cell_moments(grid, x, y, z)
+    got = acc.moments(grid, x, y, z)
+    for name in core.MOMENTS:  # same sums, another order of addition
+        np.testing.assert_allclose(got[name], ref[name], rtol=1e-9, atol=1e-6)
+    zmin_ref, flat_ref = core.minimum_surface(grid, x, y, z)
+    zmin, flat = acc.minimum_surface(grid, x, y, z)
+    np.testing.assert_array_equal(flat, flat_ref)
+    np.testing.assert_array_equal(zmin, zmin_ref)  # a minimum is exact
+    surface = rng.normal(0, 1, (grid.rows, grid.cols))
+    np.testing.assert_allclose(acc.sampler(grid, x, y)(surface), core.Sampler(grid, x, y)(surface), rtol=0, atol=1e-12)
+    # the whole filter gives the same labels either way
+    a = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0)
+    b = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0, accel=acc)
+    assert (a.ground != b.ground).sum() <= 2  # only float-rounding ties at the tolerance may differ

@@ -201,7 +201,8 @@ class GroundResult:
 
 
 def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, ground_threshold: float,
-                  slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True) -> GroundResult:
+                  slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True,
+                  accel=None) -> GroundResult:
     """Label ground points (all lengths in the cloud's units).
 
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
@@ -211,12 +212,16 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     3. The remaining cells' minima, holes filled, give a provisional bare earth; a point is
        ground when it lies within ``ground_threshold + slope_factor · slope · cell`` of it
        (steep cells tolerate more, as a cell's points spread over its height range).
+
+    ``accel`` (optional) provides ``moments(grid, x, y, z)`` and ``sampler(grid, x, y)`` doing the
+    per-point passes in parallel kernels; the numpy versions here are their references.
     """
     grid = Grid.around(x, y, cell)
-    zmin, flat = minimum_surface(grid, x, y, z)
+    zmin, flat = accel.minimum_surface(grid, x, y, z) if accel is not None else minimum_surface(grid, x, y, z)
     noise = low_outliers(grid, z, flat, zmin, low_outlier)
     if noise.any():
-        zmin, _ = minimum_surface(grid, x[~noise], y[~noise], z[~noise], flat[~noise])
+        keep = ~noise
+        zmin, _ = minimum_surface(grid, None, None, z[keep], flat[keep])
     occupied = np.isfinite(zmin)
     filled = fill_holes(zmin, occupied)
     is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
@@ -224,13 +229,14 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     if not keep.any():
         keep = occupied
     provisional = fill_holes(np.where(keep, zmin, np.nan), keep)
-    sample = Sampler(grid, x, y)
+    sample = accel.sampler(grid, x, y) if accel is not None else Sampler(grid, x, y)
     ground, dz = _near_surface(sample, grid.cell, provisional, z, ground_threshold, slope_factor, low_outlier)
     ground &= ~noise
     if refine and ground.sum() >= 3:
         # second pass: the surface fitted to the first pass's ground points (plane per cell)
         # follows the terrain between cell minima, so the same tolerance separates better
-        refined, _ = dtm_from_ground(grid, x[ground], y[ground], z[ground])
+        refined, _ = dtm_from_ground(grid, x[ground], y[ground], z[ground],
+                                     moments=accel.moments if accel is not None else None)
         ground, dz = _near_surface(sample, grid.cell, refined, z, ground_threshold, slope_factor, low_outlier)
         ground &= ~noise
         provisional = refined
@@ -245,7 +251,24 @@ def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):
     return (dz <= tol) & (dz >= -below), dz
 
 
-def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
+MOMENTS = ("n", "x", "y", "z", "xx", "yy", "xy", "xz", "yz", "zz")
+
+
+def cell_moments(grid: Grid, x, y, z) -> dict:
+    """Per-cell sums of 1, dx, dy, z, dx², dy², dx·dy, dx·z, dy·z, z² with dx, dy the offsets of
+    each point from its cell's centre (numpy; the reference of the taichi kernel)."""
+    r, c = grid.index(x, y)
+    xs, ys = grid.centres()
+    dx = x - xs[c]
+    dy = y - ys[r]
+    flat = r * grid.cols + c
+    N = grid.rows * grid.cols
+    weights = (None, dx, dy, z, dx * dx, dy * dy, dx * dy, dx * z, dy * z, z * z)
+    return {name: np.bincount(flat, weights=w, minlength=N).astype(np.float64).reshape(grid.rows, grid.cols)
+            for name, w in zip(MOMENTS, weights)}
+
+
+def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None):
     """Bare-earth height at every cell centre from ground points.
 
     Each cell gets the least-squares plane through the ground points of its 3x3 neighbourhood,
@@ -253,21 +276,11 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
     points or a degenerate fit are holes, filled harmonically. Returns (dtm, support) where
     support marks cells computed from points (not interpolated).
     """
-    r, c = grid.index(x, y)
-    xs, ys = grid.centres()
-    dx = x - xs[c]
-    dy = y - ys[r]
-    flat = r * grid.cols + c
     shape = (grid.rows, grid.cols)
-    N = grid.rows * grid.cols
-
     # moments about each point's own cell centre, shifted to the neighbourhood's centre cell:
     # sums over the 3x3 block of (dx + ox) etc. are rebuilt from per-cell sums of 1, dx, dy, ...
-    one = np.ones_like(x)
-    S = {}
-    for name, w in (("n", one), ("x", dx), ("y", dy), ("z", z), ("xx", dx * dx), ("yy", dy * dy),
-                    ("xy", dx * dy), ("xz", dx * z), ("yz", dy * z)):
-        S[name] = np.bincount(flat, weights=w, minlength=N).reshape(shape)
+    S = (moments or cell_moments)(grid, x, y, z)
+    zz_cells = S.pop("zz")
     # neighbour offsets (in units) of each of the 9 cells relative to the centre cell
     tot = {k: np.zeros(shape) for k in ("n", "x", "y", "z", "xx", "yy", "xy", "xz", "yz")}
     pad = {k: np.pad(v, 1) for k, v in S.items()}
@@ -303,8 +316,7 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3):
     # it within the heights of the points around the cell
     # (bounds from the neighbourhood's mean and spread: cheaper than per-cell min/max scatters)
     with np.errstate(invalid="ignore", divide="ignore"):
-        zz = ndimage.uniform_filter(np.bincount(flat, weights=z * z, minlength=N).reshape(shape), 3,
-                                    mode="constant") * 9.0
+        zz = ndimage.uniform_filter(zz_cells, 3, mode="constant") * 9.0
         mean3 = tot["z"] / n_
         sd3 = np.sqrt(np.maximum(zz / n_ - mean3 * mean3, 0.0))
     zlo = mean3 - 2.5 * sd3 - 0.5 * cell

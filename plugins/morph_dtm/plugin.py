@@ -28,7 +28,7 @@ GROUND_PARAMETERS = [
 ]
 
 
-def _ground(pc, p):
+def _ground(pc, p, accel=None):
     """Run the ground filter with the parameters converted to the cloud's units."""
     from .core import Grid, ground_filter
 
@@ -39,7 +39,7 @@ def _ground(pc, p):
     return ground_filter(
         pc.x, pc.y, pc.z, cell=cell, max_size=p["max_filter_size_m"] / hu,
         k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
-        slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu,
+        slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu, accel=accel,
     ), Grid
 
 
@@ -57,7 +57,7 @@ def _max_cells() -> int:
     return int(min(MAX_CELLS, 0.5 * total / BYTES_PER_CELL))
 
 
-def _ground_and_noise(pc, params):
+def _ground_and_noise(pc, params, accel=None):
     """Ground and noise masks: from the morphological filter, or the file's classes 2 and 7."""
     import numpy as np
 
@@ -66,7 +66,7 @@ def _ground_and_noise(pc, params):
         if cls0 is None or not np.any(cls0 == 2):
             raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
         return cls0 == 2, cls0 == 7
-    gr, _ = _ground(pc, params)
+    gr, _ = _ground(pc, params, accel)
     return gr.ground, gr.noise
 
 
@@ -100,7 +100,14 @@ def _footprint(grid, x, y, radius_cells):
     return ndimage.binary_fill_holes(closed | occ)
 
 
-def _dtm_raster(pc, ground_mask, resolution_m):
+def _accel(ctx):
+    """Parallel taichi kernels for the per-point passes (numpy when taichi cannot start)."""
+    from .kernels import TaichiAccel
+
+    return TaichiAccel(ctx.taichi())
+
+
+def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
     import numpy as np
     from affine import Affine
 
@@ -114,7 +121,7 @@ def _dtm_raster(pc, ground_mask, resolution_m):
     g = ground_mask
     if g.sum() < 3:
         raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
-    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g])
+    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g], moments=accel.moments if accel is not None else None)
     inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
     dtm = np.where(inside, dtm, np.nan).astype(np.float32)
     return Raster(dtm, Affine(grid.cell, 0, grid.west, 0, -grid.cell, grid.north), crs=pc.crs,
@@ -146,10 +153,11 @@ def _run_dtm(inputs, params, ctx):
 
     pc = inputs["points"]
     _check_grids(pc, params)
+    accel = _accel(ctx)
     t0 = time.perf_counter()
-    ground, noise = _ground_and_noise(pc, params)
+    ground, noise = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
-    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"])
+    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
     t2 = time.perf_counter()
     cls = np.ones(len(pc), np.uint8)
     cls[ground] = 2
@@ -189,8 +197,9 @@ def _run_classify(inputs, params, ctx):
 
     pc = inputs["points"]
     _check_grids(pc, params)
-    ground, noise = _ground_and_noise(pc, params)
-    dtm, grid = _dtm_raster(pc, ground, params["resolution_m"])
+    accel = _accel(ctx)
+    ground, noise = _ground_and_noise(pc, params, accel)
+    dtm, grid = _dtm_raster(pc, ground, params["resolution_m"], accel)
     surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
     h = pc.z - bilinear(grid, surface, pc.x, pc.y)
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import os
 import warnings
+from collections.abc import MutableMapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
@@ -27,6 +28,58 @@ ASCII_EXTENSIONS = (".txt", ".xyz", ".csv", ".asc", ".pts")
 _CRS_VLRS = {"GeoKeyDirectoryVlr", "GeoDoubleParamsVlr", "GeoAsciiParamsVlr", "WktCoordinateSystemVlr"}
 # EPSG unit codes of the GeoTIFF VerticalUnitsGeoKey (4099) -> metres per unit
 _GEOTIFF_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
+
+
+class LazyFields(MutableMapping):
+    """Per-point attributes backed by the file's laspy point record: a dimension is decoded the
+    first time it is read, and the record is reused as-is when the cloud is written back, so
+    untouched dimensions cost nothing either way. Assigned values override the record."""
+
+    def __init__(self, record, names, overrides=None):
+        self.record = record
+        self._names = list(names)
+        self._cache: dict[str, np.ndarray] = {}
+        self.overrides: dict[str, np.ndarray] = dict(overrides or {})
+
+    def __getitem__(self, name):
+        if name in self.overrides:
+            return self.overrides[name]
+        if name in self._cache:
+            return self._cache[name]
+        if name not in self._names:
+            raise KeyError(name)
+        value = np.asarray(self.record[name]).copy()
+        self._cache[name] = value
+        return value
+
+    def __setitem__(self, name, value):
+        self.overrides[name] = value
+
+    def __delitem__(self, name):
+        if name in self.overrides and name not in self._names:
+            del self.overrides[name]
+        else:
+            raise KeyError(f"{name}: dimensions of the file cannot be removed")
+
+    def __iter__(self):
+        yield from self._names
+        yield from (n for n in self.overrides if n not in self._names)
+
+    def __len__(self):
+        return len(self._names) + sum(1 for n in self.overrides if n not in self._names)
+
+    def __contains__(self, name):
+        return name in self.overrides or name in self._names
+
+    def subset(self, idx) -> "LazyFields":
+        sub = LazyFields(self.record[idx], self._names, {k: v[idx] for k, v in self.overrides.items()})
+        sub._cache = {k: v[idx] for k, v in self._cache.items()}
+        return sub
+
+    def with_overrides(self, new: dict) -> "LazyFields":
+        out = LazyFields(self.record, self._names, {**self.overrides, **new})
+        out._cache = self._cache
+        return out
 
 
 @dataclass
@@ -58,7 +111,8 @@ class PointCloud:
         n = len(self.x)
         if len(self.y) != n or len(self.z) != n:
             raise ValueError("x, y, z must have the same length")
-        for k, v in self.fields.items():
+        eager = self.fields.overrides if isinstance(self.fields, LazyFields) else self.fields
+        for k, v in eager.items():
             if len(v) != n:
                 raise ValueError(f"field {k!r} has {len(v)} values for {n} points")
 
@@ -78,13 +132,19 @@ class PointCloud:
 
     def subset(self, mask_or_index) -> "PointCloud":
         idx = mask_or_index
-        return replace(
-            self,
-            x=self.x[idx], y=self.y[idx], z=self.z[idx],
-            fields={k: v[idx] for k, v in self.fields.items()},
-        )
+        fields = self.fields.subset(idx) if isinstance(self.fields, LazyFields) else \
+            {k: v[idx] for k, v in self.fields.items()}
+        out = replace(self, x=self.x[idx], y=self.y[idx], z=self.z[idx], fields=fields, meta=dict(self.meta))
+        src = self.meta.get("_xyz_source")
+        if src is not None and isinstance(fields, LazyFields) and _xyz_untouched(self, src):
+            out.meta["_xyz_source"] = (out.x, out.y, out.z, fields.record)
+        else:
+            out.meta.pop("_xyz_source", None)
+        return out
 
     def with_fields(self, **new_fields: np.ndarray) -> "PointCloud":
+        if isinstance(self.fields, LazyFields):
+            return replace(self, fields=self.fields.with_overrides(new_fields))
         f = dict(self.fields)
         f.update(new_fields)
         return replace(self, fields=f)
@@ -192,11 +252,7 @@ def read_points(path: str | os.PathLike, crs=None) -> PointCloud:
         return _apply_crs(pc, user_crs)
     las = _read_las_data(path)
     hdr = las.header
-    fields = {}
-    for name in las.point_format.dimension_names:
-        if name in ("X", "Y", "Z"):
-            continue
-        fields[name] = np.asarray(las[name]).copy()
+    fields = LazyFields(las.points, [n for n in las.point_format.dimension_names if n not in ("X", "Y", "Z")])
     file_crs = None
     if user_crs is None:
         try:
@@ -207,6 +263,7 @@ def read_points(path: str | os.PathLike, crs=None) -> PointCloud:
         x=np.asarray(las.x), y=np.asarray(las.y), z=np.asarray(las.z),
         fields=fields, source=str(path), header=hdr,
     )
+    pc.meta["_xyz_source"] = (pc.x, pc.y, pc.z, las.points)
     crs_final = user_crs if user_crs is not None else file_crs
     if crs_final is None:
         log.info("%s has no CRS; outputs will have none (pass --crs EPSG:nnnn to set it)", path)
@@ -325,20 +382,60 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
     if path.suffix.lower() not in LAS_EXTENSIONS:
         raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
     header = _header_for(pc)
-    std = set(header.point_format.dimension_names)
-    extra = [laspy.ExtraBytesParams(name=n, type=_extra_type(v)) for n, v in pc.fields.items() if n not in std]
-    if extra:  # declared before the points exist, so the record array is allocated once
-        header.add_extra_dims(extra)
-    las = laspy.LasData(header, points=laspy.ScaleAwarePointRecord.zeros(len(pc), header=header))
-    las.x, las.y, las.z = pc.x, pc.y, pc.z
-    for name, values in pc.fields.items():
-        las[name] = values
+    las = _reuse_record(pc, header)
+    if las is None:
+        std = set(header.point_format.dimension_names)
+        extra = [laspy.ExtraBytesParams(name=n, type=_extra_type(v)) for n, v in pc.fields.items() if n not in std]
+        if extra:  # declared before the points exist, so the record array is allocated once
+            header.add_extra_dims(extra)
+        las = laspy.LasData(header, points=laspy.ScaleAwarePointRecord.zeros(len(pc), header=header))
+        las.x, las.y, las.z = pc.x, pc.y, pc.z
+        for name, values in pc.fields.items():
+            las[name] = values
     if len(pc):
         header.mins = [pc.x.min(), pc.y.min(), pc.z.min()]
         header.maxs = [pc.x.max(), pc.y.max(), pc.z.max()]
     with atomic_path(path, overwrite) as tmp:
         las.write(tmp, laz_backend=_laz_backend() if path.suffix.lower() == ".laz" else None)
     return path
+
+
+def _xyz_untouched(pc: PointCloud, src) -> bool:
+    """Whether x, y, z are still the arrays decoded from the record, unmodified (the same objects,
+    and a sample of values equal to the record's: catches edits in place)."""
+    if not (pc.x is src[0] and pc.y is src[1] and pc.z is src[2]):
+        return False
+    rec = src[3]
+    n = len(rec)
+    if n == 0:
+        return True
+    i = np.unique(np.linspace(0, n - 1, min(n, 997)).astype(np.int64))
+    sample = rec[i]
+    return (np.array_equal(np.asarray(sample.x), pc.x[i]) and np.array_equal(np.asarray(sample.y), pc.y[i])
+            and np.array_equal(np.asarray(sample.z), pc.z[i]))
+
+
+def _reuse_record(pc: PointCloud, header):
+    """LasData on a copy of the source's point record (untouched dimensions are not decoded and
+    encoded again), or None when the record cannot serve (other point format, new dimensions)."""
+    import laspy
+
+    f = pc.fields
+    if not isinstance(f, LazyFields) or len(f.record) != len(pc):
+        return None
+    rec_fmt = f.record.point_format
+    if rec_fmt.id != header.point_format.id or any(n not in rec_fmt.dimension_names for n in f.overrides):
+        return None
+    header.point_format = rec_fmt  # same id, and the record's extra bytes
+    header.scales, header.offsets = f.record.scales, f.record.offsets
+    record = laspy.ScaleAwarePointRecord(f.record.array.copy(), rec_fmt, f.record.scales, f.record.offsets)
+    las = laspy.LasData(header, points=record)
+    src = pc.meta.get("_xyz_source")
+    if src is None or src[3] is not f.record or not _xyz_untouched(pc, src):
+        las.x, las.y, las.z = pc.x, pc.y, pc.z
+    for name, values in f.overrides.items():
+        las[name] = values
+    return las
 
 
 def _laz_backend():
