@@ -273,3 +273,13 @@ def test_dtm_kernels_match_their_numpy_references():
     a = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0)
     b = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0, accel=acc)
     assert (a.ground != b.ground).sum() <= 2  # only float-rounding ties at the tolerance may differ
+
+
+@pytest.mark.parametrize("multidirectional", [False, True])
+def test_hillshade_in_row_blocks_equals_whole(multidirectional):
+    rng = np.random.default_rng(0)
+    dem = rng.normal(0, 5, (700, 531)).cumsum(0).cumsum(1) * 0.01
+    dem[100:120, 50:60] = np.nan
+    whole = core.hillshade(dem, 1.0, -1.0, multidirectional=multidirectional, block_rows=10**9)
+    blocks = core.hillshade(dem, 1.0, -1.0, multidirectional=multidirectional, block_rows=64)
+    assert np.array_equal(whole, blocks)

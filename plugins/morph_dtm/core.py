@@ -345,7 +345,7 @@ def _plane_value_at_centre(m: dict):
 
 def hillshade(dem: np.ndarray, ewres: float, nsres: float, azimuth_deg: float = 315.0, altitude_deg: float = 45.0,
               z_factor: float = 1.0, scale: float = 1.0, multidirectional: bool = False, nodata_mask=None,
-              compute_edges: bool = True) -> np.ndarray:
+              compute_edges: bool = True, block_rows: int = 256) -> np.ndarray:
     """Hillshade with gdaldem's formulas (Horn gradient), as uint8 1..255 with 0 = nodata.
 
     ``ewres`` is the positive cell width and ``nsres`` the (negative, north-up) cell height, as in
@@ -354,6 +354,19 @@ def hillshade(dem: np.ndarray, ewres: float, nsres: float, azimuth_deg: float = 
     """
     z = np.asarray(dem, dtype=np.float64)
     valid = np.isfinite(z) if nodata_mask is None else (~nodata_mask & np.isfinite(z))
+    rows = z.shape[0]
+    if rows > block_rows:
+        # row blocks with a one-row halo: bounded temporaries, the same result
+        out = np.empty(z.shape, np.uint8)
+        for r0 in range(0, rows, block_rows):
+            a, b = max(r0 - 1, 0), min(r0 + block_rows + 1, rows)
+            part = hillshade(np.where(valid[a:b], z[a:b], np.nan), ewres, nsres, azimuth_deg, altitude_deg,
+                             z_factor, scale, multidirectional, None, True, block_rows=b - a)
+            out[r0:min(r0 + block_rows, rows)] = part[r0 - a:r0 - a + min(block_rows, rows - r0)]
+        if not compute_edges:
+            out[0, :] = out[-1, :] = 0
+            out[:, 0] = out[:, -1] = 0
+        return out
     centre = np.where(valid, z, 0.0)
     p = np.pad(np.where(valid, z, np.nan), 1, constant_values=np.nan)
     rows, cols = z.shape
