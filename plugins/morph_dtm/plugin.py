@@ -100,8 +100,13 @@ def _footprint(grid, x, y, radius_cells):
     return ndimage.binary_fill_holes(closed | occ)
 
 
-def _accel(ctx):
-    """Parallel taichi kernels for the per-point passes (numpy when taichi cannot start)."""
+KERNEL_MIN_POINTS = 300_000  # below this, compiling the kernels costs more than they save
+
+
+def _accel(ctx, n_points: int):
+    """Parallel taichi kernels for the per-point passes of large clouds; numpy for small ones."""
+    if n_points < KERNEL_MIN_POINTS:
+        return None
     from .kernels import TaichiAccel
 
     return TaichiAccel(ctx.taichi())
@@ -153,7 +158,7 @@ def _run_dtm(inputs, params, ctx):
 
     pc = inputs["points"]
     _check_grids(pc, params)
-    accel = _accel(ctx)
+    accel = _accel(ctx, len(pc))
     t0 = time.perf_counter()
     ground, noise = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
@@ -197,7 +202,7 @@ def _run_classify(inputs, params, ctx):
 
     pc = inputs["points"]
     _check_grids(pc, params)
-    accel = _accel(ctx)
+    accel = _accel(ctx, len(pc))
     ground, noise = _ground_and_noise(pc, params, accel)
     dtm, grid = _dtm_raster(pc, ground, params["resolution_m"], accel)
     surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
