@@ -222,8 +222,9 @@ def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) 
             tmp.write_text(json.dumps(data, indent=2, default=_json_default), encoding="utf-8")
         return {"keys": sorted(data)[:20] if isinstance(data, dict) else None}
     if kind == "image":
-        write_png(np.asarray(data), path, overwrite)
-        return {"width": int(np.asarray(data).shape[-2]), "height": int(np.asarray(data).shape[-3] if np.asarray(data).ndim == 3 else np.asarray(data).shape[0])}
+        img = np.asarray(data)
+        write_png(img, path, overwrite)
+        return {"height": int(img.shape[0]), "width": int(img.shape[1])}
     raise UsageError(f"unknown output kind {kind!r}")
 
 
