@@ -27,12 +27,20 @@ def shared_file(rel: str) -> Path:
 def example_plugin_site(tmp_path_factory) -> Path:
     """The example third-party plugin installed with pip into its own site folder (for real:
     a built wheel with its entry point metadata, not a path hack)."""
+    import shutil
+
     target = tmp_path_factory.mktemp("site")
-    subprocess.run(
+    # build from a private copy: setuptools writes build/ and *.egg-info into the source folder,
+    # and test workers running in parallel would race on them
+    src = tmp_path_factory.mktemp("plugin-src") / "third_party_plugin"
+    shutil.copytree(ROOT / "examples" / "third_party_plugin", src,
+                    ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    r = subprocess.run(
         [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index",
-         "--target", str(target), str(ROOT / "examples" / "third_party_plugin")],
-        check=True, capture_output=True, text=True,
+         "--target", str(target), str(src)],
+        capture_output=True, text=True,
     )
+    assert r.returncode == 0, f"installing the example plugin failed:\n{r.stdout}\n{r.stderr}"
     return target
 
 
