@@ -260,3 +260,19 @@ def test_hough_lines_on_a_binary_raster_finds_the_edges_of_a_building(tmp_path):
     for p in true:
         d = np.hypot(corners.geometry.x - p[0], corners.geometry.y - p[1]).min()
         assert d < 0.5, (p, d)
+
+
+def test_default_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, caplog):
+    """The method's 0.5 m top-hat cell finds nothing on AHN4's side-by-side conductors; the run
+    says so and names the parameter instead of returning an empty file silently."""
+    import logging
+
+    path = shared_file("ahn4_corridor/07CZ2_14.laz")
+    las = laspy.read(path)
+    sub = laspy.LasData(las.header)
+    sub.points = las.points[np.isin(las.classification, [1, 2, 9, 14, 15])]
+    sub.write(tmp_path / "ahn4.laz")
+    with caplog.at_level(logging.WARNING):
+        rep = toolbox.run("powerlines", tmp_path / "ahn4.laz", tmp_path / "pl.gpkg", crs="EPSG:28992")
+    assert rep["stats"]["n_conductors"] == 0
+    assert any("try --set cell_size_m=0.1" in r.getMessage() for r in caplog.records)

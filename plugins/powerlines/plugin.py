@@ -138,6 +138,13 @@ def _run(inputs, params, ctx):
         cls[cls != 2] = 1
         cls[wire_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
+    if len(cond) == 0 and len(keep) >= 200 and len(th) < 0.15 * len(keep):
+        # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
+        # opening keeps, and the top-hat throws the wires away
+        ctx.log.warning(
+            "powerlines: the top-hat kept %d of %d wire-like points and no conductor was found; conductors "
+            "hanging side by side closer than cell_size_m=%g merge into a band the opening removes - "
+            "try --set cell_size_m=0.1", len(th), len(keep), params["cell_size_m"])
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
              "height_max_m_used": round(h_max, 2), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((wire_of >= 0).sum()),
