@@ -14,7 +14,6 @@ import toolbox
 from conftest import shared_file
 from toolbox.io.points import read_points
 from toolbox.io.rasters import Raster, read_raster, write_raster
-from toolbox.registry import registry
 from toolbox_plugins.morph_dtm import core
 from toolbox_plugins.morph_dtm.evaluation import ground_errors
 
@@ -186,7 +185,7 @@ def test_classify_reports_on_ahn3_buildings(tmp_path):
 
 def test_feet_input_gives_dtm_in_feet(tmp_path):
     path = shared_file("pdal_autzen/autzen_trim.las")
-    rep = toolbox.run("dtm", path, tmp_path / "a.tif", resolution_m=1.0)
+    toolbox.run("dtm", path, tmp_path / "a.tif", resolution_m=1.0)
     dtm = read_raster(tmp_path / "a.tif")
     assert dtm.cell_size == pytest.approx(1 / 0.3048)  # 1 m expressed in the file's feet
     assert dtm.crs is not None

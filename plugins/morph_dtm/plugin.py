@@ -197,7 +197,7 @@ def _run_hillshade(inputs, params, ctx):
 def _run_classify(inputs, params, ctx):
     import numpy as np
 
-    from .core import bilinear, Grid
+    from .core import bilinear
     from .objects import classify_objects
 
     pc = inputs["points"]

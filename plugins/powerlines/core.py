@@ -19,28 +19,6 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 
-def sample_grid(data: np.ndarray, transform, x, y) -> np.ndarray:
-    """Bilinear value of a north-up grid (cell centres) at x, y; NaN cells fall back to the nearest
-    finite value around them."""
-    z = np.asarray(data, np.float64)
-    if not np.isfinite(z).all():
-        from scipy import ndimage
-
-        bad = ~np.isfinite(z)
-        idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-        z = z[tuple(idx)]
-    r = (transform.f - y) / -transform.e - 0.5
-    c = (x - transform.c) / transform.a - 0.5
-    rows, cols = z.shape
-    r = np.clip(r, 0, rows - 1)
-    c = np.clip(c, 0, cols - 1)
-    r0 = np.minimum(r.astype(np.int64), max(rows - 2, 0))
-    c0 = np.minimum(c.astype(np.int64), max(cols - 2, 0))
-    fr, fc = r - r0, c - c0
-    r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
-    return (z[r0, c0] * (1 - fr) * (1 - fc) + z[r0, c1] * (1 - fr) * fc + z[r1, c0] * fr * (1 - fc) + z[r1, c1] * fr * fc)
-
-
 def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
                   surface_density: float | None = None, max_axis_slope: float = 0.7):
     """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.

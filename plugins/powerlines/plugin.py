@@ -17,9 +17,8 @@ def _run(inputs, params, ctx):
     import numpy as np
     from shapely.geometry import LineString
 
-    from toolbox.io.points import PointCloud
 
-    from .core import conductors_3d, sample_grid, shape_classes
+    from .core import conductors_3d, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -30,7 +29,7 @@ def _run(inputs, params, ctx):
     dres = ctx.call("dtm", {"points": pc}, ground=params["ground"], resolution_m=1.0)
     dtm = dres.outputs["dtm"]
     ground_cls = dres.outputs["classified"].classification
-    hag = (pc.z - sample_grid(dtm.data, dtm.transform, pc.x, pc.y)) * vu  # metres
+    hag = (pc.z - dtm.sample(pc.x, pc.y)) * vu  # metres
     timings["ground_s"] = time.perf_counter() - t
 
     # 2. candidates: not ground or noise, height window, first returns where the file has them

@@ -13,7 +13,6 @@ KINDS = ("corridor", "terrain", "roofs")
 def _run(inputs, params, ctx):
     import datetime
 
-    import numpy as np
 
     from toolbox.io.points import PointCloud, parse_crs
     from toolbox.io.rasters import Raster

@@ -40,6 +40,29 @@ class Raster:
     def bands(self) -> np.ndarray:
         return self.data if self.data.ndim == 3 else self.data[np.newaxis]
 
+    def sample(self, x, y) -> np.ndarray:
+        """Bilinear value of band 1 at points x, y (cell centres; north-up grids). Nodata cells take
+        the nearest valid value around them, so points at the data's edge still get a height."""
+        from scipy import ndimage
+
+        t = self.transform
+        z = np.where(self.valid_mask(), self.bands()[0].astype(np.float64), np.nan)
+        if not np.isfinite(z).all():
+            bad = ~np.isfinite(z)
+            idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+            z = z[tuple(idx)]
+        r = (t.f - y) / -t.e - 0.5
+        c = (x - t.c) / t.a - 0.5
+        rows, cols = z.shape
+        r = np.clip(r, 0, rows - 1)
+        c = np.clip(c, 0, cols - 1)
+        r0 = np.minimum(r.astype(np.int64), max(rows - 2, 0))
+        c0 = np.minimum(c.astype(np.int64), max(cols - 2, 0))
+        fr, fc = r - r0, c - c0
+        r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
+        return (z[r0, c0] * (1 - fr) * (1 - fc) + z[r0, c1] * (1 - fr) * fc
+                + z[r1, c0] * fr * (1 - fc) + z[r1, c1] * fr * fc)
+
     def valid_mask(self) -> np.ndarray:
         band = self.bands()[0]
         if self.nodata is None:
@@ -68,7 +91,6 @@ def read_raster(path: str | os.PathLike) -> Raster:
 
 def write_raster(r: Raster, path: str | os.PathLike, style_dirs=(), overwrite: bool = False) -> Path:
     """Write a Cloud Optimized GeoTIFF atomically, plus ``<name>.qml`` when a style is found."""
-    import rasterio
     from rasterio.io import MemoryFile
     from rasterio.shutil import copy as rio_copy
 

@@ -21,7 +21,7 @@ import numpy as np
 from .objects import (
     Building, Trees, catenary_sag, catenary_z, lattice_tower, sample_segments, vegetation_class, wood_pole,
 )
-from .terrain import Terrain
+from .terrain import Terrain, _line_frame
 
 KINDS = ("corridor", "terrain", "roofs")
 DEFAULT_EXTENT = {"corridor": (600.0, 250.0), "terrain": (400.0, 300.0), "roofs": (160.0, 120.0)}
@@ -319,9 +319,8 @@ def _power_lines(kind, W, H, rng, terrain):
 
 
 def _line_distance(u, v, line):
-    d = line["dir"]
-    p = line["towers"][0]
-    return np.abs(-(u - p[0]) * d[1] + (v - p[1]) * d[0])
+    p, d = line["towers"][0], line["dir"]
+    return np.abs(_line_frame(u, v, p[0], p[1], p[0] + d[0], p[1] + d[1])[0])
 
 
 def _place_buildings(kind, W, H, rng, terrain, lines):
