@@ -1,6 +1,6 @@
 """2D Hough line detection for power-line conductors (Grigillo, Ozvaldič, Vrečko, Kosmatin Fras
 2015, Geodetski vestnik 59(2) 246-261; METHODS.md §1). Pure functions on numpy arrays; the
-accumulator is filled by a pluggable ``accumulate`` (the taichi kernel or its numpy reference).
+accumulator is pluggable: ``kernels.TaichiAccumulator`` or its numpy twin ``reference.NumpyAccumulator``.
 
 Normal form x·cosθ + y·sinθ = ρ, θ ∈ [-90°, 90°) in ``theta_step_deg`` steps, ρ rounded to
 ``rho_step_m``. Peaks are taken one at a time (no local-maximum search): the largest cell, its
@@ -14,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .reference import bin_index, bin_scales
 
 
 @dataclass
@@ -71,12 +73,13 @@ def fit_line(px, py, max_gap: float):
     return c, direction, float(np.sqrt(np.mean(resid ** 2))) if len(resid) else 0.0
 
 
-def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: float = 0.1, band_m: float = 0.4,
+def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step_m: float = 0.1, band_m: float = 0.4,
                  min_votes: int = 15, s_min_m: float = 8.0, v_max_m: float = 2.5, max_lines: int = 500,
                  max_accumulator_bytes: int = 2 << 30, fit_points: str = "band") -> list[HoughLine]:
     """Lines in points (x, y) of one tile, already shifted to a local origin (numerical range).
 
-    ``accumulate(x, y, cos_t, sin_t, k_min, inv_drho, acc, sign)`` fills the accumulator.
+    ``new_accumulator(cos_t, sin_t, k_min, inv_drho, n_rho)`` makes the accumulator (see
+    ``reference.NumpyAccumulator`` for its methods).
     ``fit_points``: "inverse" refits each line on its inverse-Hough points (the paper's choice,
     quantised to the ρ bin), "band" on the points within ±band_m (sharper).
     """
@@ -92,21 +95,26 @@ def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: f
             f"(limit {max_accumulator_bytes / 2**30:.1f} GiB)")
     cos_t, sin_t = np.cos(thetas), np.sin(thetas)
     inv = 1.0 / rho_step_m
-    # stored θ-major (a row per θ, a column per ρ: the method's H transposed) so that each θ's
-    # votes are contiguous and one kernel thread owns them
-    acc = np.zeros((len(thetas), rows), np.int32)
-    accumulate(x, y, cos_t, sin_t, k_min, inv, acc, 1)
+    with new_accumulator(cos_t, sin_t, k_min, inv, rows) as acc:
+        acc.vote(x, y, 1)
+        return _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, band_m=band_m, min_votes=min_votes, s_min_m=s_min_m, v_max_m=v_max_m,
+                              max_lines=max_lines, fit_points=fit_points)
+
+
+def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m, min_votes, s_min_m,
+                   v_max_m, max_lines, fit_points) -> list[HoughLine]:
+    """The method's iterative peak extraction: take the largest cell, validate its inverse-Hough
+    points, subtract the band's votes, until the largest cell is below ``min_votes``."""
+    bin_cs, bin_ss, bin_off = bin_scales(cos_t, sin_t, k_min, 1.0 / rho_step_m)
     active = np.ones(len(x), bool)
     lines: list[HoughLine] = []
     for _ in range(max_lines * 4):
-        peak = int(np.argmax(acc))
-        c, r = divmod(peak, acc.shape[1])  # c: θ index, r: ρ bin
-        votes = int(acc[c, r])
+        c, r, votes = acc.peak()  # c: θ index, r: ρ bin
         if votes < min_votes:
             break
         rho_p = (r + k_min) * rho_step_m
         rho_pts = x * cos_t[c] + y * sin_t[c]
-        k_pts = (rho_pts * inv + (0.5 - k_min)).astype(np.int64)  # as the accumulator bins them
+        k_pts = bin_index(x, y, bin_cs[c], bin_ss[c], bin_off)  # as the accumulator bins them
         inverse = np.flatnonzero(active & (k_pts == r))
         band = np.flatnonzero(active & (np.abs(rho_pts - rho_p) <= band_m))
         # along-line positions: t = -x sinθ + y cosθ
@@ -126,9 +134,9 @@ def detect_lines(x, y, accumulate, *, theta_step_deg: float = 0.1, rho_step_m: f
                                    (float(tt.min()), float(tt.max()))))
         # subtract the band's votes (also for a rejected peak, so that the next one comes up)
         if len(band) == 0:
-            acc[c, r] = 0  # numerically isolated cell: clear it
+            acc.clear_cell(c, r)  # numerically isolated cell: clear it
             continue
-        accumulate(x[band], y[band], cos_t, sin_t, k_min, inv, acc, -1)
+        acc.vote(x[band], y[band], -1)
         active[band] = False
         if len(lines) >= max_lines:
             break
@@ -245,7 +253,7 @@ def tiles(x, y, size: float, overlap: float):
                 yield float(x0), float(y0), m
 
 
-def detect_tiled(x, y, accumulate, *, tile_size_m: float = 100.0, overlap_m: float = 10.0,
+def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m: float = 10.0,
                  merge_angle_deg: float = 1.0, merge_offset_m: float = 0.25, merge_gap_m: float = 25.0, progress=None,
                  **kw) -> list[Conductor]:
     """Hough lines per tile (each shifted to its minimum x, y), shifted back and merged: lines that
@@ -259,7 +267,7 @@ def detect_tiled(x, y, accumulate, *, tile_size_m: float = 100.0, overlap_m: flo
     s_min = kw.get("s_min_m", 8.0)
     for x0, y0, m in it:
         idx = np.flatnonzero(m)
-        for L in detect_lines(x[idx] - x0, y[idx] - y0, accumulate, **kw):
+        for L in detect_lines(x[idx] - x0, y[idx] - y0, new_accumulator, **kw):
             found.append(Conductor(L.anchor + (x0, y0), L.direction, idx[L.members], L.votes, L.rms,
                                    L.t_range, []))
     # merge collinear pieces (union-find over pairs)

@@ -42,14 +42,14 @@ def hough_params(params: dict) -> dict:
 def detect(ctx, x, y, params):
     """Tiled detection with the taichi accumulator; errors as one line."""
     from .core import AccumulatorTooLarge, detect_tiled
-    from .kernels import accumulate
+    from .kernels import TaichiAccumulator
 
     if params["overlap_m"] >= params["tile_size_m"] > 0:
         raise UsageError(f"overlap_m ({params['overlap_m']}) must be smaller than tile_size_m ({params['tile_size_m']})")
     ti = ctx.taichi()
     try:
         return detect_tiled(
-            x, y, lambda *a: accumulate(ti, *a), tile_size_m=params["tile_size_m"], overlap_m=params["overlap_m"],
+            x, y, lambda *a: TaichiAccumulator(ti, *a), tile_size_m=params["tile_size_m"], overlap_m=params["overlap_m"],
             merge_gap_m=params["merge_gap_m"],
             max_accumulator_bytes=int(params["max_accumulator_mb"] * 2**20),
             progress=lambda it: ctx.progress(it, desc="hough tiles", unit="tile"), **hough_params(params))
