@@ -25,6 +25,23 @@ def test_laz_round_trip_keeps_every_dimension_and_crs(small_scene, tmp_path):
     np.testing.assert_array_equal(back.fields["score"], score)
 
 
+def test_writing_changed_fields_leaves_the_source_cloud_as_it_was(small_scene, tmp_path):
+    """The writer reuses the source's point record in place (no copy) and must put it back."""
+    pc = read_points(small_scene)
+    before = pc.fields.record.array.copy()
+    new_cls = np.full(len(pc), 6, np.uint8)
+    moved = pc.with_fields(classification=new_cls)
+    moved.z = pc.z + 1.0  # xyz edited too
+    out = read_points(write_points(moved, tmp_path / "changed.laz"))
+    np.testing.assert_array_equal(out.classification, new_cls)
+    np.testing.assert_allclose(out.z, pc.z + 1.0, atol=0.0005)
+    assert np.array_equal(pc.fields.record.array, before)  # the source record is untouched
+    # and a write that fails half way restores it as well
+    with pytest.raises(Exception):
+        write_points(moved, tmp_path / "missing-dir" / "x.laz")
+    assert np.array_equal(pc.fields.record.array, before)
+
+
 def test_las_and_laz_hold_the_same_points(small_scene, tmp_path):
     pc = read_points(small_scene)
     a = read_points(write_points(pc, tmp_path / "a.las"))

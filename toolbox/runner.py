@@ -200,8 +200,12 @@ def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) 
         summary = {"n_points": len(data)}
         cls = data.classification
         if cls is not None and len(cls):
-            u, c = np.unique(cls, return_counts=True)
-            summary["classes"] = {int(k): int(v) for k, v in zip(u, c)}
+            counts = np.bincount(cls) if cls.dtype.kind in "ub" else None
+            if counts is not None:  # classes are small integers: a count per value, no sort
+                summary["classes"] = {int(k): int(v) for k, v in enumerate(counts) if v}
+            else:
+                u, c = np.unique(cls, return_counts=True)
+                summary["classes"] = {int(k): int(v) for k, v in zip(u, c)}
         return summary
     if kind == "raster":
         from .io.rasters import Raster, write_raster

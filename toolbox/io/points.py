@@ -382,7 +382,7 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
     if path.suffix.lower() not in LAS_EXTENSIONS:
         raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
     header = _header_for(pc)
-    las = _reuse_record(pc, header)
+    las, restore = _reuse_record(pc, header)
     if las is None:
         std = set(header.point_format.dimension_names)
         extra = [laspy.ExtraBytesParams(name=n, type=_extra_type(v)) for n, v in pc.fields.items() if n not in std]
@@ -392,11 +392,13 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
         las.x, las.y, las.z = pc.x, pc.y, pc.z
         for name, values in pc.fields.items():
             las[name] = values
-    if len(pc):
-        header.mins = [pc.x.min(), pc.y.min(), pc.z.min()]
-        header.maxs = [pc.x.max(), pc.y.max(), pc.z.max()]
-    with atomic_path(path, overwrite) as tmp:
-        las.write(tmp, laz_backend=_laz_backend() if path.suffix.lower() == ".laz" else None)
+    # (bounds, counts per return and the GPS time range are filled in by laspy as it writes)
+    try:
+        with atomic_path(path, overwrite) as tmp:
+            las.write(tmp, laz_backend=_laz_backend() if path.suffix.lower() == ".laz" else None)
+    finally:
+        if restore is not None:
+            restore()
     return path
 
 
@@ -416,26 +418,40 @@ def _xyz_untouched(pc: PointCloud, src) -> bool:
 
 
 def _reuse_record(pc: PointCloud, header):
-    """LasData on a copy of the source's point record (untouched dimensions are not decoded and
-    encoded again), or None when the record cannot serve (other point format, new dimensions)."""
+    """(LasData on the source's own point record, a function restoring that record) — untouched
+    dimensions are neither decoded nor encoded again, and the record is not copied: changed
+    dimensions are written into it for the write and put back by ``restore()`` (a copy of a 10 M
+    point record cost 0.6 s). (None, None) when the record cannot serve (other point format, new
+    dimensions)."""
     import laspy
 
     f = pc.fields
     if not isinstance(f, LazyFields) or len(f.record) != len(pc):
-        return None
+        return None, None
     rec_fmt = f.record.point_format
     if rec_fmt.id != header.point_format.id or any(n not in rec_fmt.dimension_names for n in f.overrides):
-        return None
+        return None, None
     header.point_format = rec_fmt  # same id, and the record's extra bytes
     header.scales, header.offsets = f.record.scales, f.record.offsets
-    record = laspy.ScaleAwarePointRecord(f.record.array.copy(), rec_fmt, f.record.scales, f.record.offsets)
+    record = laspy.ScaleAwarePointRecord(f.record.array, rec_fmt, f.record.scales, f.record.offsets)
     las = laspy.LasData(header, points=record)
     src = pc.meta.get("_xyz_source")
+    changed = {}
     if src is None or src[3] is not f.record or not _xyz_untouched(pc, src):
+        changed.update({n: np.array(record.array[n]) for n in ("X", "Y", "Z")})
         las.x, las.y, las.z = pc.x, pc.y, pc.z
     for name, values in f.overrides.items():
+        changed.setdefault(name, np.array(record[name]))
         las[name] = values
-    return las
+
+    def restore():
+        for name, values in changed.items():
+            if name in ("X", "Y", "Z"):
+                record.array[name] = values
+            else:
+                record[name] = values
+
+    return las, restore
 
 
 def _laz_backend():
