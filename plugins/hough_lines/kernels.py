@@ -48,23 +48,42 @@ def _build(ti):
                             flat[a] = flat[a] + sign
 
     @ti.kernel
-    def row_peaks(flat: ti.template(), n_theta: ti.i32, n_rho: ti.i32,
-                  row_max: ti.types.ndarray(dtype=ti.i32, ndim=1), row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        # per θ row: its largest count and the first ρ bin holding it (4 iterations per row, one
-        # working: see TASK_STRIDE)
+    def unvote(xs: ti.template(), ys: ti.template(), cs: ti.template(), ss: ti.template(), flat: ti.template(),
+               n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32,
+               row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        # subtract a band's votes (few points: one θ per task) and mark the rows whose peak cell
+        # lost votes: only those need their maximum found again
         for t in range(n_theta * 4):
             if t % 4 == 0:
                 j = t // 4
+                peak_bin = row_arg[j]
+                hit = 0
+                for i in range(n):
+                    k = ti.cast(xs[i] * cs[j] + ys[i] * ss[j] + off, ti.i32)
+                    flat[j * n_rho + k] = flat[j * n_rho + k] - 1
+                    if k == peak_bin:
+                        hit = 1
+                if hit:
+                    dirty[j] = 1
+
+    @ti.kernel
+    def row_peaks(flat: ti.template(), n_theta: ti.i32, n_rho: ti.i32, dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  row_max: ti.types.ndarray(dtype=ti.i32, ndim=1), row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        # per dirty θ row: its largest count and the first ρ bin holding it (4 iterations per
+        # row, one working: see TASK_STRIDE); a branch-free max, then the first match
+        for t in range(n_theta * 4):
+            if t % 4 == 0 and dirty[t // 4] != 0:
+                j = t // 4
                 base = j * n_rho
                 best = flat[base]
-                arg = 0
                 for k in range(1, n_rho):
-                    v = flat[base + k]
-                    if v > best:
-                        best = v
-                        arg = k
+                    best = ti.max(best, flat[base + k])
+                arg = 0
+                while flat[base + arg] != best:
+                    arg += 1
                 row_max[j] = best
                 row_arg[j] = arg
+                dirty[j] = 0
 
     @ti.kernel
     def load_pairs(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1),
@@ -83,7 +102,7 @@ def _build(ti):
         for i in range(out.shape[0]):
             out[i] = flat[i]
 
-    return dict(vote=vote, row_peaks=row_peaks, load_pairs=load_pairs, clear=clear, copy_out=copy_out)
+    return dict(vote=vote, unvote=unvote, row_peaks=row_peaks, load_pairs=load_pairs, clear=clear, copy_out=copy_out)
 
 
 def _field(ti, name: str, dtype, size: int):
@@ -116,28 +135,41 @@ class TaichiAccumulator:
         self.k["load_pairs"](cs, ss, self.cs, self.ss)
         self.flat = _field(ti, "flat", ti.i32, self.size)
         self.k["clear"](self.flat, self.size)
-        self._row_max = np.empty(self.shape[0], np.int32)
-        self._row_arg = np.empty(self.shape[0], np.int32)
+        self._row_max = np.zeros(self.shape[0], np.int32)
+        self._row_arg = np.zeros(self.shape[0], np.int32)
+        self._dirty = np.ones(self.shape[0], np.int32)  # rows whose (max, first bin) must be found again
         _state["busy"] = True
 
-    def vote(self, x, y, sign: int = 1) -> None:
-        if len(x) == 0:
-            return
+    def _load(self, x, y):
         x = np.ascontiguousarray(x, np.float32)
         y = np.ascontiguousarray(y, np.float32)
         xs = _field(self.ti, "xs", self.ti.f32, len(x))
         ys = _field(self.ti, "ys", self.ti.f32, len(x))
         self.k["load_pairs"](x, y, xs, ys)
+        return xs, ys
+
+    def vote(self, x, y, sign: int = 1) -> None:
+        if len(x) == 0:
+            return
+        xs, ys = self._load(x, y)
+        if sign < 0 and len(x) * self.shape[0] < 50_000_000:
+            # a band's votes: also flags the rows whose peak cell changed
+            self.k["unvote"](xs, ys, self.cs, self.ss, self.flat, len(x), self.shape[0], self.shape[1],
+                             float(self.off), self._row_arg, self._dirty)
+            return
         self.k["vote"](xs, ys, self.cs, self.ss, self.flat, len(x), self.shape[0], self.shape[1], float(self.off),
                        int(sign))
+        self._dirty[:] = 1
 
     def peak(self) -> tuple[int, int, int]:
-        self.k["row_peaks"](self.flat, self.shape[0], self.shape[1], self._row_max, self._row_arg)
+        if self._dirty.any():
+            self.k["row_peaks"](self.flat, self.shape[0], self.shape[1], self._dirty, self._row_max, self._row_arg)
         c = int(np.argmax(self._row_max))  # first row holding the maximum: numpy's flat argmax order
         return c, int(self._row_arg[c]), int(self._row_max[c])
 
     def clear_cell(self, c: int, r: int) -> None:
         self.flat[c * self.shape[1] + r] = 0
+        self._dirty[c] = 1
 
     def to_numpy(self) -> np.ndarray:
         out = np.empty(self.size, np.int32)
