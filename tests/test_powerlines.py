@@ -309,3 +309,24 @@ def test_default_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, caplo
         rep = toolbox.run("powerlines", tmp_path / "ahn4.laz", tmp_path / "pl.gpkg", crs="EPSG:28992")
     assert rep["stats"]["n_conductors"] == 0
     assert any("try --set cell_size_m=0.1" in r.getMessage() for r in caplog.records)
+
+
+def test_closed_form_eigen_matches_numpy():
+    from toolbox_plugins.powerlines.core import principal_axes, symmetric3_eigenvalues
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(2000, 12, 3)) * rng.uniform(0.01, 3, size=(2000, 1, 3))
+    pts[:10, :, 1:] = 0.0  # points on a line: two zero eigenvalues
+    pts[10:20] = pts[10:20, :1]  # one point repeated: all zero
+    c = pts - pts.mean(axis=1, keepdims=True)
+    cov = np.matmul(c.transpose(0, 2, 1), c) / 12
+    ev, vec = np.linalg.eigh(cov)
+    mine = symmetric3_eigenvalues(cov)
+    # the cubic's acos loses digits where two eigenvalues meet: 1e-8 of the largest, against
+    # shape thresholds of a few per cent
+    np.testing.assert_allclose(mine, ev, atol=1e-8 * max(1.0, float(ev.max())))
+    axes = principal_axes(cov, mine[:, 2])
+    np.testing.assert_allclose(np.linalg.norm(axes, axis=1), 1.0)
+    separated = ev[:, 2] - ev[:, 1] > 1e-6 * ev[:, 2]
+    assert np.abs(np.sum(axes * vec[:, :, 2], axis=1))[separated].min() > 1 - 1e-9
+    assert np.allclose(np.abs(axes[:10, 0]), 1.0)  # the line's own direction

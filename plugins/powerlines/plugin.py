@@ -11,6 +11,20 @@ REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vest
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
 
 
+def _occupied_square_metres(x, y) -> int:
+    """How many 1 m cells hold a point (an occupancy grid: no sort of all the points)."""
+    import numpy as np
+
+    x0, y0 = np.floor(x.min()), np.floor(y.min())
+    cols = int(np.floor(x.max() - x0)) + 1
+    rows = int(np.floor(y.max() - y0)) + 1
+    if rows * cols > 400_000_000:  # a sparse survey over a huge extent: count distinct cells instead
+        return len(np.unique((np.floor(x - x0).astype(np.int64) * rows + np.floor(y - y0).astype(np.int64))))
+    occ = np.zeros(rows * cols, bool)
+    occ[(y - y0).astype(np.int64) * cols + (x - x0).astype(np.int64)] = True
+    return int(np.count_nonzero(occ))
+
+
 def _run(inputs, params, ctx):
     import time
 
@@ -29,12 +43,15 @@ def _run(inputs, params, ctx):
     dres = ctx.call("dtm", {"points": pc}, ground=params["ground"], resolution_m=1.0)
     dtm = dres.outputs["dtm"]
     ground_cls = dres.outputs["classified"].classification
-    hag = (pc.z - dtm.sample(pc.x, pc.y)) * vu  # metres
+    # height above ground (metres) where it is needed: off-ground points (most points are ground)
+    off = np.flatnonzero((ground_cls != 2) & (ground_cls != 7))
+    hag = np.full(len(pc), -np.inf)
+    hag[off] = (pc.z[off] - dtm.sample(pc.x[off], pc.y[off])) * vu
     timings["ground_s"] = time.perf_counter() - t
 
     # 2. candidates: not ground or noise, height window, first returns where the file has them
     t = time.perf_counter()
-    cand = (ground_cls != 2) & (ground_cls != 7) & (hag >= params["height_min_m"])
+    cand = hag >= params["height_min_m"]
     h_max = params["height_max_m"]
     if h_max is None:  # automatic: everything above the window's floor, minus the topmost outliers
         above = hag[cand]
@@ -49,8 +66,7 @@ def _run(inputs, params, ctx):
                         "above ground; check height_min_m / height_max_m")
     xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
     # the survey's surface density: points per occupied square metre (corridor strips included)
-    cells = np.unique(np.floor(pc.x * hu).astype(np.int64) * 10_000_000 + np.floor(pc.y * hu).astype(np.int64))
-    surface_density = len(pc) / max(len(cells), 1)
+    surface_density = len(pc) / max(_occupied_square_metres(pc.x * hu, pc.y * hu), 1)
     if rn is not None and np.any(rn > 0) and params["first_returns_only"]:
         surface_density *= float(np.mean(rn == 1))
     linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
