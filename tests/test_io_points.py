@@ -42,6 +42,28 @@ def test_writing_changed_fields_leaves_the_source_cloud_as_it_was(small_scene, t
     assert np.array_equal(pc.fields.record.array, before)
 
 
+def test_selective_decompression_reads_the_rest_on_demand(small_scene, tmp_path):
+    """dims= decompresses only the declared layers; anything else, and writing, stay exact."""
+    full = read_points(small_scene)
+    part = read_points(small_scene, dims=("classification",))
+    assert part.fields.selected is not None  # the scene is LAZ point format 6: a partial record
+    np.testing.assert_array_equal(part.z, full.z)
+    np.testing.assert_array_equal(part.classification, full.classification)
+    np.testing.assert_array_equal(part.fields["return_number"], full.fields["return_number"])
+    # the layer that was skipped reads as zeros in laspy's record: we must not hand that out
+    skipped = np.asarray(part.fields.record["gps_time"])
+    assert not np.array_equal(skipped, full.fields["gps_time"])
+    sub_idx = np.flatnonzero(full.classification != 2)[::7]
+    sub = part.subset(sub_idx)
+    np.testing.assert_array_equal(sub.fields["gps_time"], full.fields["gps_time"][sub_idx])
+    np.testing.assert_array_equal(part.fields["intensity"], full.fields["intensity"])
+    # a partial cloud written out keeps every dimension
+    part2 = read_points(small_scene, dims=())
+    back = read_points(write_points(part2.subset(sub_idx), tmp_path / "sub.laz"))
+    for name in ("gps_time", "intensity", "object_id", "classification"):
+        np.testing.assert_array_equal(back.fields[name], full.fields[name][sub_idx])
+
+
 def test_las_and_laz_hold_the_same_points(small_scene, tmp_path):
     pc = read_points(small_scene)
     a = read_points(write_points(pc, tmp_path / "a.las"))

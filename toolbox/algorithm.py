@@ -153,6 +153,11 @@ class Input:
 
     ``multiple`` inputs take one or more files at once (a photo set, tiles to merge). A
     single input given several files runs the algorithm as a batch, one file at a time.
+
+    ``dims`` (points inputs): the per-point dimensions the algorithm reads besides x, y, z, e.g.
+    ``("classification", "return_number")``. When given and the run writes no point cloud, LAZ
+    files are decompressed for those dimensions only; reading any other one still works (the
+    host then reads the whole file again), it is just slower.
     """
 
     name: str
@@ -160,6 +165,7 @@ class Input:
     description: str
     multiple: bool = False
     optional: bool = False
+    dims: tuple | None = None
 
     def __post_init__(self):
         if self.kind not in INPUT_KINDS:

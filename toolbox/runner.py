@@ -166,11 +166,11 @@ def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, 
 # Reading and writing
 # --------------------------------------------------------------------------------------------
 
-def read_input(kind: str, path: str, crs=None):
+def read_input(kind: str, path: str, crs=None, dims=None):
     if kind == "points":
         from .io.points import read_points
 
-        return read_points(path, crs=crs)
+        return read_points(path, crs=crs, dims=dims)
     if kind == "raster":
         from .io.rasters import read_raster
 
@@ -326,13 +326,16 @@ def run_algorithm(
         check_writable(p, overwrite)
 
     specs = {s.name: s for s in alg.inputs}
+    # a run that writes points writes every dimension: read them all; otherwise only the declared
+    writes_points = any(o.kind == "points" and o.name in paths for o in alg.outputs)
     data = {}
     for name, val in assigned.items():
         kind = specs[name].kind
+        dims = None if writes_points else specs[name].dims
         if isinstance(val, list):
-            data[name] = [read_input(kind, v, crs) for v in val]
+            data[name] = [read_input(kind, v, crs, dims) for v in val]
         else:
-            data[name] = read_input(kind, val, crs)
+            data[name] = read_input(kind, val, crs, dims)
     t_read = time.perf_counter()
 
     ctx = Context(reg, alg.id, requested=requested)

@@ -154,6 +154,6 @@ def toolbox_algorithms():
                      "crossings from line pairs confirmed by their validated segments."),
         reference=REFERENCE,
         parameters=PARAMETERS,
-        inputs=[Input("points", "points", "points of thin structures (e.g. the tophat output)")],
+        inputs=[Input("points", "points", "points of thin structures (e.g. the tophat output)", dims=())],
         outputs=[Output("lines", "vector", "layers conductors, conductor_segments, crossings")],
     )]

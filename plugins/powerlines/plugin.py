@@ -237,7 +237,8 @@ def toolbox_algorithms():
                       "splits into wires by height (conductors side by side at other heights are caught too)",
                       unit="m", minimum=0.05, maximum=10.0),
         ],
-        inputs=[Input("points", "points", "raw LAS/LAZ point cloud")],
+        inputs=[Input("points", "points", "raw LAS/LAZ point cloud",
+                      dims=("classification", "return_number", "number_of_returns"))],
         outputs=[
             Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d"),
             Output("classified", "points", "the input with the detected wire points as class 14", optional=True,

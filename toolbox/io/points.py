@@ -33,13 +33,28 @@ _GEOTIFF_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
 class LazyFields(MutableMapping):
     """Per-point attributes backed by the file's laspy point record: a dimension is decoded the
     first time it is read, and the record is reused as-is when the cloud is written back, so
-    untouched dimensions cost nothing either way. Assigned values override the record."""
+    untouched dimensions cost nothing either way. Assigned values override the record.
 
-    def __init__(self, record, names, overrides=None):
+    A record read with a decompression selection (``read_points(dims=...)``) holds only the
+    selected dimensions; reading any other one, or writing the cloud, first reads the whole file
+    again (once, logged), so a partial read is never visible as missing or zeroed data."""
+
+    def __init__(self, record, names, overrides=None, selected=None, source=None, index=None):
         self.record = record
         self._names = list(names)
         self._cache: dict[str, np.ndarray] = {}
         self.overrides: dict[str, np.ndarray] = dict(overrides or {})
+        self.selected = None if selected is None else frozenset(selected)  # None: the record is complete
+        self._source = source  # _FullRead of the file, for completing a partial record
+        self._index = index  # integer positions of this record's points in the file
+
+    def complete(self) -> None:
+        """Make the record whole (read the file again without a selection) if it is partial."""
+        if self.selected is None:
+            return
+        full = self._source.record()
+        self.record = full if self._index is None else full[self._index]
+        self.selected = None
 
     def __getitem__(self, name):
         if name in self.overrides:
@@ -48,6 +63,10 @@ class LazyFields(MutableMapping):
             return self._cache[name]
         if name not in self._names:
             raise KeyError(name)
+        if self.selected is not None and name not in self.selected:
+            log.info("%s: %r was not among the dimensions decompressed; reading the whole file",
+                     self._source.path, name)
+            self.complete()
         value = np.asarray(self.record[name]).copy()
         self._cache[name] = value
         return value
@@ -72,14 +91,53 @@ class LazyFields(MutableMapping):
         return name in self.overrides or name in self._names
 
     def subset(self, idx) -> "LazyFields":
-        sub = LazyFields(self.record[idx], self._names, {k: v[idx] for k, v in self.overrides.items()})
+        pos = None
+        if self.selected is not None:  # remember where these points sit in the file
+            here = np.flatnonzero(idx) if np.asarray(idx).dtype == bool else np.asarray(idx)
+            pos = here if self._index is None else self._index[here]
+        sub = LazyFields(self.record[idx], self._names, {k: v[idx] for k, v in self.overrides.items()},
+                         self.selected, self._source, pos)
         sub._cache = {k: v[idx] for k, v in self._cache.items()}
         return sub
 
     def with_overrides(self, new: dict) -> "LazyFields":
-        out = LazyFields(self.record, self._names, {**self.overrides, **new})
+        out = LazyFields(self.record, self._names, {**self.overrides, **new}, self.selected, self._source,
+                         self._index)
         out._cache = self._cache
         return out
+
+
+class _FullRead:
+    """The whole point record of a file, read on first need (completes partial reads)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._record = None
+
+    def record(self):
+        if self._record is None:
+            self._record = _read_las_data(self.path).points
+        return self._record
+
+
+# laspy's decompression layers (LAS 1.4 point formats 6-10) that hold each dimension; x, y and
+# the return numbers are always decoded
+def _selection_for(dims, extra_names):
+    import laspy
+
+    DS = laspy.DecompressionSelection
+    layer = {"z": DS.Z, "classification": DS.CLASSIFICATION, "intensity": DS.INTENSITY,
+             "scan_angle": DS.SCAN_ANGLE, "user_data": DS.USER_DATA, "point_source_id": DS.POINT_SOURCE_ID,
+             "gps_time": DS.GPS_TIME, "red": DS.RGB, "green": DS.RGB, "blue": DS.RGB, "nir": DS.NIR,
+             "synthetic": DS.FLAGS, "key_point": DS.FLAGS, "withheld": DS.FLAGS, "overlap": DS.FLAGS,
+             "scan_direction_flag": DS.FLAGS, "edge_of_flight_line": DS.FLAGS}
+    sel = DS.XY_RETURNS_CHANNEL | DS.Z
+    for d in dims:
+        if d in extra_names:
+            sel |= DS.ALL_EXTRA_BYTES
+        else:
+            sel |= layer.get(d, DS(0))
+    return sel
 
 
 @dataclass
@@ -242,17 +300,36 @@ def _check_exists(path: Path) -> None:
         raise UsageError(f"input {str(path)!r} is a folder; give the point cloud files in it")
 
 
-def read_points(path: str | os.PathLike, crs=None) -> PointCloud:
-    """Read a LAS/LAZ or ASCII point cloud. ``crs`` (text or pyproj CRS) sets or overrides the CRS."""
+def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
+    """Read a LAS/LAZ or ASCII point cloud. ``crs`` (text or pyproj CRS) sets or overrides the CRS.
+
+    ``dims``: the dimensions the caller will read besides x, y, z. LAZ in the LAS 1.4 point
+    formats (6-10) is then decompressed for those layers only (a 1.9 M-point file: 0.30 s instead
+    of 0.52 s); other dimensions stay available, at the cost of reading the file again."""
     path = Path(path)
     _check_exists(path)
     user_crs = parse_crs(crs) if isinstance(crs, str) else crs
     if point_format_of(path) == "ascii":
         pc = _read_ascii(path)
         return _apply_crs(pc, user_crs)
-    las = _read_las_data(path)
+    selection = None
+    if dims is not None and path.suffix.lower() == ".laz":
+        import laspy
+
+        with laspy.open(path) as reader:
+            fmt = reader.header.point_format
+        if fmt.id >= 6:
+            selection = _selection_for(set(dims), set(fmt.extra_dimension_names))
+            if selection == laspy.DecompressionSelection.all():
+                selection = None
+    las = _read_las_data(path, selection)
     hdr = las.header
-    fields = LazyFields(las.points, [n for n in las.point_format.dimension_names if n not in ("X", "Y", "Z")])
+    names = [n for n in las.point_format.dimension_names if n not in ("X", "Y", "Z")]
+    if selection is None:
+        fields = LazyFields(las.points, names)
+    else:
+        always = {"return_number", "number_of_returns", "scanner_channel"}  # decoded with x, y
+        fields = LazyFields(las.points, names, selected={*always, *dims}, source=_FullRead(path))
     file_crs = None
     if user_crs is None:
         try:
@@ -270,11 +347,11 @@ def read_points(path: str | os.PathLike, crs=None) -> PointCloud:
     return _apply_crs(pc, crs_final, hdr)
 
 
-def _read_las_data(path: Path):
+def _read_las_data(path: Path, selection=None):
     import laspy
 
     try:
-        with laspy.open(path) as reader:
+        with (laspy.open(path) if selection is None else laspy.open(path, decompression_selection=selection)) as reader:
             expected = reader.header.point_count
             las = reader.read()
     except laspy.errors.LaspyException as exc:
@@ -428,6 +505,7 @@ def _reuse_record(pc: PointCloud, header):
     f = pc.fields
     if not isinstance(f, LazyFields) or len(f.record) != len(pc):
         return None, None
+    f.complete()  # a partially decompressed record would write zeros
     rec_fmt = f.record.point_format
     if rec_fmt.id != header.point_format.id or any(n not in rec_fmt.dimension_names for n in f.overrides):
         return None, None
