@@ -5,6 +5,7 @@ import os
 
 import laspy
 import numpy as np
+import pytest
 
 from importlib.metadata import EntryPoint
 
@@ -114,6 +115,20 @@ def test_algorithm_failing_midway_leaves_no_output(small_scene, tmp_path):
     assert list(tmp_path.iterdir()) == []
     rep = run_algorithm("echo-class", [str(small_scene)], out, {"value": 7}, reg=reg)
     assert rep["outputs"]["points"]["classes"] == {7: rep["outputs"]["points"]["n_points"]}
+
+
+def test_an_output_emitted_early_is_removed_when_the_run_fails(small_scene, tmp_path):
+    reg = discover([EntryPoint(name="good", value="plugins_for_tests.fakes:good", group="toolbox.plugins")])
+    out = tmp_path / "x.laz"
+    with pytest.raises(RuntimeError, match="boom after emitting"):
+        run_algorithm("emit-then-fail", [str(small_scene)], out, {}, reg=reg)
+    assert list(tmp_path.iterdir()) == []
+    rep = run_algorithm("emit-then-finish", [str(small_scene)], out, {"value": 9}, reg=reg)
+    assert rep["outputs"]["points"]["classes"] == {9: rep["outputs"]["points"]["n_points"]}
+    back = laspy.read(out)
+    src = laspy.read(small_scene)
+    assert np.all(back.classification == 9)
+    assert np.array_equal(back.intensity, src.intensity) and np.array_equal(back.gps_time, src.gps_time)
 
 
 def test_python_api_mirrors_the_cli(tmp_path):

@@ -39,6 +39,7 @@ class Context:
     quiet: bool = False
     stats: dict[str, Any] = field(default_factory=dict)
     requested: frozenset = frozenset()
+    _writer: Any = None  # the run's _OutputWriter (file runs only)
 
     def wants(self, output_name: str) -> bool:
         """Whether an optional output was asked for (required outputs are always wanted)."""
@@ -59,6 +60,14 @@ class Context:
     def taichi(self):
         """The taichi module, initialised once (CUDA when present, else CPU, or as --arch says)."""
         return kernels.taichi()
+
+    def emit(self, output_name: str, value: Any) -> None:
+        """Hand over a finished output early: the host starts writing it in the background while
+        the algorithm goes on (LAZ compression runs beside the remaining computation). The value
+        must still be returned in the Result, and must not be changed afterwards. Outside a file
+        run (``ctx.call``) this does nothing."""
+        if self._writer is not None:
+            self._writer.submit(output_name, value)
 
     def call(self, algorithm_id: str, inputs: Mapping[str, Any], **params) -> Result:
         """Run another algorithm in memory on data (not files); returns its Result."""
@@ -264,6 +273,57 @@ def _json_default(o):
     return str(o)
 
 
+class _OutputWriter:
+    """Writes a run's outputs in background threads (LAZ compression and GDAL release the GIL,
+    so writing overlaps with computing and with each other) and collects their summaries."""
+
+    def __init__(self, kinds: dict, paths: dict, style_dirs, overwrite: bool):
+        self.kinds, self.paths, self.style_dirs, self.overwrite = kinds, paths, style_dirs, overwrite
+        self.futures: dict[str, Any] = {}
+        self._pool = None
+
+    def submit(self, name: str, value: Any) -> None:
+        if value is None or name not in self.paths or name in self.futures:
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="toolbox-write")
+        self.futures[name] = self._pool.submit(write_output, self.kinds[name], value, self.paths[name],
+                                               self.style_dirs, self.overwrite)
+
+    def finish(self) -> dict:
+        """Wait for every write; the summaries, or the first error (after all have ended)."""
+        written, error = {}, None
+        for name, fut in self.futures.items():
+            try:
+                written[name] = {"path": str(self.paths[name]), "kind": self.kinds[name], **fut.result()}
+            except BaseException as exc:  # noqa: BLE001 - re-raised below, after the others end
+                error = error or exc
+        self._close()
+        if error is not None:
+            raise error
+        return written
+
+    def discard(self) -> None:
+        """Wait for writes in flight, then remove every file this run wrote."""
+        done = []
+        for name, fut in self.futures.items():
+            try:
+                fut.result()
+                done.append(name)
+            except BaseException:  # noqa: BLE001 - the run is failing anyway; a failed write left nothing
+                pass
+        self._close()
+        for name in done:
+            Path(self.paths[name]).unlink(missing_ok=True)
+
+    def _close(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
 def _as_result(value, alg: Algorithm) -> Result:
     if isinstance(value, Result):
         res = value
@@ -338,27 +398,21 @@ def run_algorithm(
             data[name] = read_input(kind, val, crs, dims)
     t_read = time.perf_counter()
 
-    ctx = Context(reg, alg.id, requested=requested)
+    writer = _OutputWriter({o.name: o.kind for o in alg.outputs}, paths, reg.style_dirs, overwrite)
+    ctx = Context(reg, alg.id, requested=requested, _writer=writer)
     try:
-        result = _as_result(alg.run(data, values, ctx), alg)
-    except ToolboxError:
-        raise
-    except MemoryError:
-        raise DataError(f"{alg.id} ran out of memory on {stem or 'its input'}; use a coarser resolution or tile the input") from None
-    t_compute = time.perf_counter()
-
-    kinds = {o.name: o.kind for o in alg.outputs}
-    written = {}
-    try:
+        try:
+            result = _as_result(alg.run(data, values, ctx), alg)
+        except MemoryError:
+            raise DataError(f"{alg.id} ran out of memory on {stem or 'its input'}; use a coarser resolution or tile "
+                            "the input") from None
+        t_compute = time.perf_counter()
         for name, value in result.outputs.items():
-            if value is None or name not in paths:
-                continue
-            summary = write_output(kinds[name], value, paths[name], reg.style_dirs, overwrite)
-            written[name] = {"path": str(paths[name]), "kind": kinds[name], **summary}
+            writer.submit(name, value)  # outputs not emitted early; the others are skipped
+        written = writer.finish()
     except BaseException:
-        # a failed write leaves no file of this run behind, also none of the outputs already written
-        for info in written.values():
-            Path(info["path"]).unlink(missing_ok=True)
+        # a failed run or write leaves no file of this run behind, also none already written
+        writer.discard()
         raise
     t_write = time.perf_counter()
     stats = dict(ctx.stats)

@@ -162,12 +162,14 @@ def _run_dtm(inputs, params, ctx):
     t0 = time.perf_counter()
     ground, noise = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
-    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
-    t2 = time.perf_counter()
     cls = np.ones(len(pc), np.uint8)
     cls[ground] = 2
     cls[noise] = 7
-    out = {"dtm": dtm, "classified": pc.with_fields(classification=cls)}
+    classified = pc.with_fields(classification=cls)
+    ctx.emit("classified", classified)  # its LAZ compresses while the DTM is interpolated
+    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
+    t2 = time.perf_counter()
+    out = {"dtm": dtm, "classified": classified}
     if ctx.wants("preview"):
         out["preview"] = _preview(dtm, pc, ground, noise)
     stats = {"n_points": len(pc), "n_ground": int(ground.sum()), "n_noise": int(noise.sum()),

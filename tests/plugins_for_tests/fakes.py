@@ -17,6 +17,24 @@ def _fail_midway(inputs, params, ctx):
     raise RuntimeError("boom in the middle")
 
 
+def _emit_then_fail(inputs, params, ctx):
+    """Hands its output over early (written in the background), then fails."""
+    import time
+
+    pc = inputs["points"]
+    ctx.emit("points", pc.with_fields(classification=np.full(len(pc), 3, np.uint8)))
+    time.sleep(0.5)  # the background write completes meanwhile
+    raise RuntimeError("boom after emitting")
+
+
+def _emit_then_finish(inputs, params, ctx):
+    pc = inputs["points"]
+    out = pc.with_fields(classification=np.full(len(pc), params["value"], np.uint8))
+    ctx.emit("points", out)
+    _ = pc.fields["intensity"]  # reading the source while its record is being written
+    return {"points": out}
+
+
 def _alg(id_, run=_echo):
     return Algorithm(
         id=id_, title="test " + id_, description="test algorithm", run=run,
@@ -32,7 +50,8 @@ def _alg(id_, run=_echo):
 class Good:
     @toolbox.hookimpl
     def toolbox_algorithms(self):
-        return [_alg("echo-class"), _alg("fail-midway", _fail_midway)]
+        return [_alg("echo-class"), _alg("fail-midway", _fail_midway), _alg("emit-then-fail", _emit_then_fail),
+                _alg("emit-then-finish", _emit_then_finish)]
 
 
 class Clash:

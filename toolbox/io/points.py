@@ -9,6 +9,7 @@ how many metres one unit is, so that algorithms whose parameters are in metres c
 from __future__ import annotations
 
 import logging
+import threading
 import os
 import warnings
 from collections.abc import MutableMapping
@@ -28,6 +29,11 @@ ASCII_EXTENSIONS = (".txt", ".xyz", ".csv", ".asc", ".pts")
 _CRS_VLRS = {"GeoKeyDirectoryVlr", "GeoDoubleParamsVlr", "GeoAsciiParamsVlr", "WktCoordinateSystemVlr"}
 # EPSG unit codes of the GeoTIFF VerticalUnitsGeoKey (4099) -> metres per unit
 _GEOTIFF_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
+
+
+# Held while a writer has changed dimensions swapped into a source record (see _reuse_record),
+# and while a dimension is decoded from a record: outputs are written in background threads.
+RECORD_LOCK = threading.RLock()
 
 
 class LazyFields(MutableMapping):
@@ -63,11 +69,12 @@ class LazyFields(MutableMapping):
             return self._cache[name]
         if name not in self._names:
             raise KeyError(name)
-        if self.selected is not None and name not in self.selected:
-            log.info("%s: %r was not among the dimensions decompressed; reading the whole file",
-                     self._source.path, name)
-            self.complete()
-        value = np.asarray(self.record[name]).copy()
+        with RECORD_LOCK:  # a background writer may have the record's dimensions swapped
+            if self.selected is not None and name not in self.selected:
+                log.info("%s: %r was not among the dimensions decompressed; reading the whole file",
+                         self._source.path, name)
+                self.complete()
+            value = np.asarray(self.record[name]).copy()
         self._cache[name] = value
         return value
 
@@ -453,11 +460,16 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
     dimensions otherwise. Clouds that did not come from LAS are written as LAS 1.4 point
     format 6 with a WKT CRS.
     """
-    import laspy
-
     path = Path(path)
     if path.suffix.lower() not in LAS_EXTENSIONS:
         raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
+    with RECORD_LOCK:
+        return _write_points_locked(pc, path, overwrite)
+
+
+def _write_points_locked(pc: PointCloud, path: Path, overwrite: bool) -> Path:
+    import laspy
+
     header = _header_for(pc)
     las, restore = _reuse_record(pc, header)
     if las is None:
