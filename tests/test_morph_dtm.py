@@ -6,6 +6,7 @@ import json
 
 import laspy
 import numpy as np
+from scipy import ndimage
 import pytest
 import rasterio
 from affine import Affine
@@ -84,6 +85,27 @@ def test_fill_holes_is_exact_on_planes_and_smooth():
     filled = core.fill_holes(holes)
     np.testing.assert_allclose(filled[10:25, 5:30], plane[10:25, 5:30], atol=1e-6)
     assert np.isfinite(filled).all()
+
+
+def test_fill_holes_inside_a_footprint_only():
+    """A diagonal strip of data: holes inside it are solved exactly on a plane; cells outside
+    take the nearest value; a footprint island without any known cell does not break the solve."""
+    yy, xx = np.mgrid[0:60, 0:60].astype(float)
+    plane = 3.0 + 0.2 * xx - 0.1 * yy
+    strip = np.abs(xx - yy) < 8
+    known = strip.copy()
+    known[27:33, 27:33] = False  # a building inside the strip
+    island = (xx > 50) & (yy < 6)  # in the footprint, but with no data at all
+    domain = strip | island
+    filled = core.fill_holes(np.where(known, plane, np.nan), known, domain)
+    np.testing.assert_allclose(filled[27:33, 27:33], plane[27:33, 27:33], atol=1e-6)
+    assert np.isfinite(filled).all()
+    outside = ~domain
+    near = ndimage.distance_transform_edt(~strip, return_distances=False, return_indices=True)
+    np.testing.assert_allclose(filled[outside], filled[near[0][outside], near[1][outside]])
+    # the same holes without a domain: the same values inside the strip
+    whole = core.fill_holes(np.where(known, plane, np.nan), known)
+    np.testing.assert_allclose(filled[strip], whole[strip], atol=1e-6)
 
 
 def test_dtm_from_ground_is_unbiased_on_a_steep_plane():

@@ -74,46 +74,70 @@ def low_outliers(grid: Grid, z, flat_index, zmin, threshold: float):
     return bad_cell.ravel()[flat_index] & (z < ref - threshold)
 
 
-def fill_holes(surface: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
+def footprint(occupied: np.ndarray, radius_cells: int) -> np.ndarray:
+    """Cells inside the data's footprint: the occupied cells closed over gaps of up to about
+    2·``radius_cells`` and with enclosed holes (buildings, water) filled."""
+    pad = max(int(radius_cells), 1)
+    closed = ndimage.binary_closing(np.pad(occupied, pad), iterations=pad)[pad:-pad, pad:-pad]
+    return ndimage.binary_fill_holes(closed | occupied)
+
+
+def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.ndarray | None = None) -> np.ndarray:
     """Fill unknown cells with the harmonic (Laplace) interpolation of the known cells around them.
 
     One sparse system over all unknown cells (4-neighbour Laplacian, known cells as Dirichlet
     values): smooth, no nearest-neighbour blocks, exact on planes. Holes touching the grid edge
     get a natural (zero-slope) boundary there. Returns a new array.
+
+    ``domain`` (optional) limits the system to unknown cells inside it (the data's footprint):
+    the rest of the grid, outside the survey, takes the value of the nearest filled cell. A
+    corridor strip crossing its bounding box diagonally leaves most of the box outside, and
+    solving the Laplace system there cost more than the whole ground filter.
     """
     out = np.array(surface, dtype=np.float64, copy=True)
     if known is None:
         known = np.isfinite(out)
-    unknown = ~known
-    m = int(unknown.sum())
-    if m == 0:
-        return out
     if not known.any():
         raise ValueError("no known cell to interpolate from")
-    rows, cols = out.shape
-    ids = np.full(out.shape, -1, np.int64)
-    ids[unknown] = np.arange(m)
-    rr, cc = np.nonzero(unknown)
-    diag = np.zeros(m)
-    rhs = np.zeros(m)
-    ri, ci = [], []
-    for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-        nr, nc = rr + dr, cc + dc
-        inside = (nr >= 0) & (nr < rows) & (nc >= 0) & (nc < cols)
-        diag += inside
-        src = np.flatnonzero(inside)
-        nid = ids[nr[inside], nc[inside]]
-        unk = nid >= 0
-        ri.append(src[unk])
-        ci.append(nid[unk])
-        rhs += np.bincount(src[~unk], weights=out[nr[inside][~unk], nc[inside][~unk]], minlength=m)
-    ri = np.concatenate(ri)
-    ci = np.concatenate(ci)
-    A = sparse.csc_matrix((np.r_[diag, -np.ones(len(ri))], (np.r_[np.arange(m), ri], np.r_[np.arange(m), ci])),
-                          shape=(m, m))
-    # components with no known neighbour at all (cannot happen when some cell is known and the
-    # grid is connected) would make A singular; the grid is always connected here
-    out[rr, cc] = spsolve(A, rhs)
+    unknown = ~known if domain is None else (~known & domain)
+    if domain is not None and unknown.any():
+        # only holes that reach a known cell can be solved (a region of the footprint whose
+        # cells were all removed as objects has none): the others take nearest values below
+        lab, n_lab = ndimage.label(unknown)
+        touching = np.unique(lab[ndimage.binary_dilation(known) & unknown])
+        unknown = np.isin(lab, touching[touching > 0]) if n_lab else unknown
+    m = int(unknown.sum())
+    if m:
+        rows, cols = out.shape
+        ids = np.full(out.shape, -1, np.int64)
+        ids[unknown] = np.arange(m)
+        rr, cc = np.nonzero(unknown)
+        diag = np.zeros(m)
+        rhs = np.zeros(m)
+        ri, ci = [], []
+        for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+            nr, nc = rr + dr, cc + dc
+            inside = (nr >= 0) & (nr < rows) & (nc >= 0) & (nc < cols)
+            src = np.flatnonzero(inside)
+            nr, nc = nr[inside], nc[inside]
+            nid = ids[nr, nc]
+            unk = nid >= 0
+            kn = known[nr, nc]
+            # neighbours outside the domain are like the grid edge: no coupling
+            diag += np.bincount(src[unk | kn], minlength=m)
+            ri.append(src[unk])
+            ci.append(nid[unk])
+            rhs += np.bincount(src[kn], weights=out[nr[kn], nc[kn]], minlength=m)
+        ri = np.concatenate(ri)
+        ci = np.concatenate(ci)
+        A = sparse.csc_matrix((np.r_[diag, -np.ones(len(ri))], (np.r_[np.arange(m), ri], np.r_[np.arange(m), ci])),
+                              shape=(m, m))
+        out[rr, cc] = spsolve(A, rhs)
+    rest = ~known & ~unknown
+    if rest.any():
+        filled = known | unknown
+        idx = ndimage.distance_transform_edt(~filled, return_distances=False, return_indices=True)
+        out[rest] = out[idx[0][rest], idx[1][rest]]
     return out
 
 
@@ -223,12 +247,13 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
         keep = ~noise
         zmin, _ = minimum_surface(grid, None, None, z[keep], flat[keep])
     occupied = np.isfinite(zmin)
-    filled = fill_holes(zmin, occupied)
+    domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
+    filled = fill_holes(zmin, occupied, domain)
     is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
     keep = occupied & ~is_object
     if not keep.any():
         keep = occupied
-    provisional = fill_holes(np.where(keep, zmin, np.nan), keep)
+    provisional = fill_holes(np.where(keep, zmin, np.nan), keep, domain)
     sample = accel.sampler(grid, x, y) if accel is not None else Sampler(grid, x, y)
     ground, dz = _near_surface(sample, grid.cell, provisional, z, ground_threshold, slope_factor, low_outlier)
     ground &= ~noise
@@ -236,7 +261,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
         # second pass: the surface fitted to the first pass's ground points (plane per cell)
         # follows the terrain between cell minima, so the same tolerance separates better
         refined, _ = dtm_from_ground(grid, x[ground], y[ground], z[ground],
-                                     moments=accel.moments if accel is not None else None)
+                                     moments=accel.moments if accel is not None else None, domain=domain)
         ground, dz = _near_surface(sample, grid.cell, refined, z, ground_threshold, slope_factor, low_outlier)
         ground &= ~noise
         provisional = refined
@@ -268,7 +293,7 @@ def cell_moments(grid: Grid, x, y, z) -> dict:
             for name, w in zip(MOMENTS, weights)}
 
 
-def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None):
+def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, domain=None):
     """Bare-earth height at every cell centre from ground points.
 
     Each cell gets the least-squares plane through the ground points of its 3x3 neighbourhood,
@@ -323,7 +348,7 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None):
     zhi = mean3 + 2.5 * sd3 + 0.5 * cell
     value = np.where(np.isfinite(value) & np.isfinite(mean3), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
-    return fill_holes(value, known), known
+    return fill_holes(value, known, domain), known
 
 
 def _plane_value_at_centre(m: dict):

@@ -90,14 +90,13 @@ def _check_grids(pc, params):
 def _footprint(grid, x, y, radius_cells):
     """Cells inside the data's footprint (holes of buildings and water included)."""
     import numpy as np
-    from scipy import ndimage
+
+    from .core import footprint
 
     occ = np.zeros((grid.rows, grid.cols), bool)
     r, c = grid.index(x, y)
     occ[r, c] = True
-    closed = ndimage.binary_closing(np.pad(occ, radius_cells), iterations=radius_cells)[
-        radius_cells:-radius_cells or None, radius_cells:-radius_cells or None]
-    return ndimage.binary_fill_holes(closed | occ)
+    return footprint(occ, radius_cells)
 
 
 KERNEL_MIN_POINTS = 300_000  # below this, compiling the kernels costs more than they save
@@ -126,8 +125,9 @@ def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
     g = ground_mask
     if g.sum() < 3:
         raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
-    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g], moments=accel.moments if accel is not None else None)
     inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
+    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g], moments=accel.moments if accel is not None else None,
+                             domain=inside)
     dtm = np.where(inside, dtm, np.nan).astype(np.float32)
     return Raster(dtm, Affine(grid.cell, 0, grid.west, 0, -grid.cell, grid.north), crs=pc.crs,
                   nodata=float("nan"), style="dtm", description="bare-earth DTM (morphological filter)"), grid
