@@ -118,7 +118,7 @@ def test_algorithm_failing_midway_leaves_no_output(small_scene, tmp_path):
 
 
 def test_an_output_emitted_early_is_removed_when_the_run_fails(small_scene, tmp_path):
-    reg = discover([EntryPoint(name="good", value="plugins_for_tests.fakes:good", group="toolbox.plugins")])
+    reg = discover([EntryPoint(name="emitting", value="plugins_for_tests.fakes:emitting", group="toolbox.plugins")])
     out = tmp_path / "x.laz"
     with pytest.raises(RuntimeError, match="boom after emitting"):
         run_algorithm("emit-then-fail", [str(small_scene)], out, {}, reg=reg)

@@ -50,8 +50,13 @@ def _alg(id_, run=_echo):
 class Good:
     @toolbox.hookimpl
     def toolbox_algorithms(self):
-        return [_alg("echo-class"), _alg("fail-midway", _fail_midway), _alg("emit-then-fail", _emit_then_fail),
-                _alg("emit-then-finish", _emit_then_finish)]
+        return [_alg("echo-class"), _alg("fail-midway", _fail_midway)]
+
+
+class Emitting:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        return [_alg("emit-then-fail", _emit_then_fail), _alg("emit-then-finish", _emit_then_finish)]
 
 
 class Clash:
@@ -73,6 +78,7 @@ class WrongType:
 
 
 good = Good()
+emitting = Emitting()
 clash = Clash()
 raises = Raises()
 wrong_type = WrongType()
