@@ -28,26 +28,44 @@ def structure(shape: str, size_cells: int) -> np.ndarray:
     return np.ones((size_cells, size_cells), bool)
 
 
-def tophat_points(x, y, cell_size_m: float = 0.5, max_points_per_cell: int = 45, element=CROSS):
-    """Returns (cx, cy, counts, cell_of_point, kept_cells): centroids of the kept top-hat cells,
-    their point counts, each input point's flat cell index and the boolean of kept cells."""
-    west = np.floor(x.min() / cell_size_m) * cell_size_m - cell_size_m
-    south = np.floor(y.min() / cell_size_m) * cell_size_m - cell_size_m
-    cols = int((x.max() - west) / cell_size_m) + 2
-    rows = int((y.max() - south) / cell_size_m) + 2
+def _in_sorted(values: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    i = np.searchsorted(sorted_set, values)
+    i[i == len(sorted_set)] = 0
+    return sorted_set[i] == values if len(sorted_set) else np.zeros(len(values), bool)
+
+
+def tophat_points(x, y, cell_size_m: float = 0.5, max_points_per_cell: int = 45, element=CROSS, z=None):
+    """Returns (cx, cy, cz, counts, kept_point): centroids of the kept top-hat cells (``cz`` the
+    mean height, None without ``z``), their point counts, and for each input point whether its
+    cell was kept.
+
+    The binary opening works on the occupied cells only (sorted flat indices, the element's
+    offsets looked up by binary search), not on the raster: the same cells as
+    ``scipy.ndimage.binary_opening`` of the mask (tested), but a 0.1 m mask over a survey is
+    tens of millions of mostly empty cells and cost more than the rest of the chain.
+    """
+    element = np.asarray(element, bool)
+    margin = max(element.shape) // 2 + 1  # occupied cells never see the grid's edge
+    west = np.floor(x.min() / cell_size_m) * cell_size_m - margin * cell_size_m
+    south = np.floor(y.min() / cell_size_m) * cell_size_m - margin * cell_size_m
+    cols = int((x.max() - west) / cell_size_m) + margin + 1
     c = ((x - west) / cell_size_m).astype(np.int64)
     r = ((y - south) / cell_size_m).astype(np.int64)
-    flat = r * cols + c
-    counts = np.bincount(flat, minlength=rows * cols)
-    mask = (counts > 0).reshape(rows, cols)
-    opened = ndimage.binary_opening(mask, structure=element)
-    top = (mask & ~opened).ravel()
-    kept = top & (counts < max_points_per_cell)
-    sel = np.flatnonzero(kept)
-    n = counts[sel].astype(np.float64)
-    sx = np.bincount(flat, weights=x, minlength=rows * cols)[sel]
-    sy = np.bincount(flat, weights=y, minlength=rows * cols)[sel]
-    return sx / n, sy / n, counts[sel], flat, kept
+    cells, inv, counts = np.unique(r * cols + c, return_inverse=True, return_counts=True)
+    er, ec = np.nonzero(element)
+    offsets = (er - element.shape[0] // 2) * cols + (ec - element.shape[1] // 2)
+    eroded = cells  # cells whose whole element lies on occupied cells
+    for o in offsets:
+        eroded = eroded[_in_sorted(eroded + o, cells)]
+    opened = np.zeros(len(cells), bool)  # occupied cells the eroded set's element covers
+    for o in offsets:
+        opened |= _in_sorted(cells - o, eroded)
+    kept = ~opened & (counts < max_points_per_cell)
+    n = counts.astype(np.float64)
+    sx = np.bincount(inv, weights=x, minlength=len(cells))
+    sy = np.bincount(inv, weights=y, minlength=len(cells))
+    cz = np.bincount(inv, weights=z, minlength=len(cells))[kept] / n[kept] if z is not None else None
+    return sx[kept] / n[kept], sy[kept] / n[kept], cz, counts[kept], kept[inv]
 
 
 def tophat_raster(image: np.ndarray, mode: str = "grey", element: np.ndarray = CROSS, threshold: float = 0.0):

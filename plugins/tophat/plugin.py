@@ -21,19 +21,16 @@ def _run_points(inputs, params, ctx):
     pc.require_points("tophat")
     cell = params["cell_size_m"] / pc.horizontal_unit_m
     w, s, e, n = pc.bounds()
-    if (e - w) / cell * (n - s) / cell > 400e6:
+    if (e - w) / cell * (n - s) / cell > 2**62:  # flat cell indices are int64
         raise toolbox.UsageError(f"cell_size_m: a {params['cell_size_m']} m mask over {pc.source!r} is too big; "
                                  "tile the input or use a larger cell")
-    cx, cy, counts, flat, kept = tophat_points(pc.x, pc.y, cell, params["max_points_per_cell"],
-                                               structure(params["structure"], params["size_cells"]))
     # the centroid's height: mean of the cell's points (kept for the 3D steps downstream)
-    sel = np.flatnonzero(kept)
-    sz = np.bincount(flat, weights=pc.z, minlength=len(kept))[sel]
-    out = PointCloud(cx, cy, sz / counts, fields={"point_count": counts.astype(np.uint16)}, crs=pc.crs,
+    cx, cy, cz, counts, _ = tophat_points(pc.x, pc.y, cell, params["max_points_per_cell"],
+                                          structure(params["structure"], params["size_cells"]), z=pc.z)
+    out = PointCloud(cx, cy, cz, fields={"point_count": counts.astype(np.uint16)}, crs=pc.crs,
                      source=f"tophat({pc.source})", horizontal_unit_m=pc.horizontal_unit_m,
                      vertical_unit_m=pc.vertical_unit_m)
-    return toolbox.Result({"points": out}, stats={"n_in": len(pc), "n_out": len(out),
-                                                 "cells_kept": int(kept.sum())})
+    return toolbox.Result({"points": out}, stats={"n_in": len(pc), "n_out": len(out), "cells_kept": len(out)})
 
 
 def _run_raster(inputs, params, ctx):

@@ -4,6 +4,7 @@ style embedded so that QGIS opens it styled."""
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 from ..errors import DataError, UsageError
@@ -35,7 +36,11 @@ def write_vectors(layers: dict, path: str | os.PathLike, style_dirs=(), overwrit
             if len(gdf) == 0:
                 gtype = gdf.attrs.get("geometry_type", "Unknown")
                 kwargs["geometry_type"] = gtype
-            gdf.to_file(tmp, layer=name, driver="GPKG", engine="pyogrio", **kwargs)
+            with warnings.catch_warnings():
+                # a cloud without a CRS gives layers without one: the reading step already said
+                # so (and how to set it); pyogrio's warning per layer would only repeat it
+                warnings.filterwarnings("ignore", message="'crs' was not provided")
+                gdf.to_file(tmp, layer=name, driver="GPKG", engine="pyogrio", **kwargs)
             style = find_style(name, style_dirs)
             if style is not None:
                 styles[name] = render_style(style.read_text(encoding="utf-8"))
