@@ -61,20 +61,35 @@ def _build(ti, cells: int):
     @ti.kernel
     def unvote(n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32,
                row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        # subtract a band's votes (few points: one θ per task) and mark the rows whose peak cell
-        # lost votes: only those need their maximum found again
-        for t in range(n_theta * 4):
-            if t % 4 == 0:
-                j = t // 4
-                peak_bin = row_arg[j]
-                hit = 0
-                for i in range(n):
-                    k = ti.cast(xs[i] * cs[j] + ys[i] * ss[j] + off, ti.i32)
-                    flat[j * n_rho + k] = flat[j * n_rho + k] - 1
-                    if k == peak_bin:
-                        hit = 1
-                if hit:
-                    dirty[j] = 1
+        # subtract a band's votes, blocked like ``vote``, and mark the rows whose peak cell lost
+        # votes: only those need their maximum found again
+        for t in range(((n_theta + B - 1) // B) * S):
+            if t % S == 0:
+                j0 = (t // S) * B
+                if j0 + B <= n_theta:
+                    cv = ti.Vector([cs[j0 + q] for q in ti.static(range(B))])
+                    sv = ti.Vector([ss[j0 + q] for q in ti.static(range(B))])
+                    row = ti.Vector([(j0 + q) * n_rho for q in ti.static(range(B))])
+                    peak = ti.Vector([row_arg[j0 + q] for q in ti.static(range(B))]) + row
+                    hit = ti.Vector([0 for q in ti.static(range(B))])
+                    for i in range(n):
+                        a = ti.cast(xs[i] * cv + ys[i] * sv + off, ti.i32) + row
+                        for q in ti.static(range(B)):
+                            flat[a[q]] = flat[a[q]] - 1
+                            hit[q] |= ti.cast(a[q] == peak[q], ti.i32)
+                    for q in ti.static(range(B)):
+                        if hit[q]:
+                            dirty[j0 + q] = 1
+                else:
+                    for j in range(j0, n_theta):
+                        hit = 0
+                        for i in range(n):
+                            k = ti.cast(xs[i] * cs[j] + ys[i] * ss[j] + off, ti.i32)
+                            flat[j * n_rho + k] = flat[j * n_rho + k] - 1
+                            if k == row_arg[j]:
+                                hit = 1
+                        if hit:
+                            dirty[j] = 1
 
     @ti.kernel
     def row_peaks(n_theta: ti.i32, n_rho: ti.i32, dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -153,6 +168,7 @@ class TaichiAccumulator:
         self._row_max = np.zeros(self.shape[0], np.int32)
         self._row_arg = np.zeros(self.shape[0], np.int32)
         self._dirty = np.ones(self.shape[0], np.int32)  # rows whose (max, first bin) must be found again
+        self._stale_up = True  # whether counts may have grown since the rows were last scanned
         _busy[0] = True
 
     def vote(self, x, y, sign: int = 1) -> None:
@@ -169,15 +185,27 @@ class TaichiAccumulator:
             else:
                 self.k["vote"](len(xp), n_theta, n_rho, float(self.off), int(sign))
                 self._dirty[:] = 1
+                self._stale_up |= sign > 0
 
     def peak(self) -> tuple[int, int, int]:
-        if self._dirty.any():
+        dirty = self._dirty.astype(bool)
+        if dirty.any():
+            if self._stale_up:  # after votes were added, old maxima bound nothing: rescan them all
+                rescan = dirty
+            else:
+                # subtraction only lowers counts, so a dirty row's old maximum bounds its new one:
+                # only rows that could still hold (or tie) the largest count are rescanned
+                clean = self._row_max[~dirty]
+                rescan = dirty & (self._row_max >= (clean.max() if len(clean) else np.iinfo(np.int32).min))
+            self._dirty[:] = rescan
             self.k["row_peaks"](self.shape[0], self.shape[1], self._dirty, self._row_max, self._row_arg)
+            self._dirty[:] = dirty & ~rescan
+            self._stale_up = False
         c = int(np.argmax(self._row_max))  # first row holding the maximum: numpy's flat argmax order
         return c, int(self._row_arg[c]), int(self._row_max[c])
 
     def clear_cell(self, c: int, r: int) -> None:
-        self.k["set_cell"](c * self.shape[1] + r, 0)
+        self.k["set_cell"](c * self.shape[1] + r, 0)  # lowers a count: the row's bound still holds
         self._dirty[c] = 1
 
     def to_numpy(self) -> np.ndarray:
