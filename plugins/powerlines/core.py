@@ -37,9 +37,6 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     cov = np.matmul(centred.transpose(0, 2, 1), centred) / k  # (batched matmul: 3x einsum's speed)
     ev = symmetric3_eigenvalues(cov)
     share = ev / (ev.sum(axis=1, keepdims=True) + 1e-12)
-    # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
-    axis_z = np.abs(principal_axes(cov, ev[:, 2])[:, 2])
-    steep = axis_z > max_axis_slope / np.hypot(1.0, max_axis_slope)
     rugged = share[:, 0] >= rugged_share
     planar = ~rugged & (share[:, 1] >= planar_share)
     if surface_density is not None:
@@ -50,7 +47,11 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
             if len(p):
                 counts = tree.query_ball_point(xyz[p], 1.0, return_length=True, workers=-1)
                 mask[p] = counts >= 0.5 * np.pi * surface_density
-    linear = ~rugged & ~planar & ~steep
+    linear = ~rugged & ~planar
+    # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
+    li = np.flatnonzero(linear)
+    axis_z = np.abs(principal_axes(cov[li], ev[li, 2])[:, 2])
+    linear[li[axis_z > max_axis_slope / np.hypot(1.0, max_axis_slope)]] = False
     # edges of roofs (and of crowns) are locally linear: a wire never touches a surface
     for surface, reach in ((planar, 1.0), (rugged, 0.5)):
         if surface.any() and linear.any():
