@@ -207,6 +207,8 @@ def test_stacked_conductors_are_separated_in_3d(corridor_result):
         wires = c3[c3.conductor == i]
         heights = sorted(np.mean([p[2] for p in g.coords]) for g in wires.geometry)
         assert heights[-1] - heights[0] > 4.0  # arms 6 m apart
+    # every wire is one wire across its poles and pylons: as many as in the truth
+    assert c3.groupby(["conductor", "wire"]).ngroups == len(truth["wires"])
     # sags: catenaries of line A hang 2-4 m over 185 m spans, as the truth
     long_spans = c3[(c3.length_m > 150) & (c3.rms_m < 0.1)]
     assert len(long_spans) >= 8

@@ -231,7 +231,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))
         _, lab = connected_components(g, directed=False)
         lab = _split_bundles(s, off, lab, min_points)
-        wire_of = _chain_pieces(s, z, lab, min_points, gap_max=4 * s_link, z_tol=z_link)
+        wire_of = _chain_pieces(s, z, lab, min_points, gap_max=6 * s_link, z_tol=z_link)
         for k in range(lab.max() + 1):
             m = lab == k
             if wire_of[k] < 0 or s[m].max() - s[m].min() < min_span:
@@ -306,24 +306,37 @@ def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: i
     return lab
 
 
-def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float) -> np.ndarray:
+def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float, slope_window: float = 10.0) -> np.ndarray:
     """Wire number of each connected piece (-1: too small). Pieces follow each other along the
     line across gaps (pylons, occlusions) when one ends where the next begins, at about the same
-    height; wires are numbered from the highest down."""
+    height; wires are numbered from the highest down.
+
+    Heights are compared where the two pieces' end slopes (lines over ``slope_window`` at each
+    end) meet in the middle of the gap: a wire rises to a pole and falls after it, so across a
+    20 m gap at a pole its ends differ by metres while their extrapolations agree."""
     n = lab.max() + 1
     counts = np.bincount(lab, minlength=n)
+
+    def end_line(sk, zk, at, side):
+        w = sk >= at - slope_window if side > 0 else sk <= at + slope_window
+        if w.sum() >= 5 and np.ptp(sk[w]) > 1.0:
+            slope, icpt = np.polyfit(sk[w], zk[w], 1)
+            return float(slope * at + icpt), float(slope)
+        near = sk >= at - 2.0 if side > 0 else sk <= at + 2.0
+        return float(np.median(zk[near])), 0.0
+
     info = []
     for k in range(n):
         if counts[k] < min_points:
             continue
         m = lab == k
         sk, zk = s[m], z[m]
-        lo, hi = sk.min(), sk.max()
-        z_lo = float(np.median(zk[sk <= lo + 2.0]))
-        z_hi = float(np.median(zk[sk >= hi - 2.0]))
-        info.append((float(lo), float(hi), z_lo, z_hi, k, float(np.median(zk))))
+        lo, hi = float(sk.min()), float(sk.max())
+        z_lo, slope_lo = end_line(sk, zk, lo, -1)
+        z_hi, slope_hi = end_line(sk, zk, hi, +1)
+        info.append((lo, hi, z_lo, z_hi, k, float(np.median(zk)), slope_lo, slope_hi))
     info.sort()
-    parent = {k: k for *_, k, _ in info}
+    parent = {i[4]: i[4] for i in info}
 
     def root(a):
         while parent[a] != a:
@@ -331,23 +344,24 @@ def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float) -> n
         return a
 
     taken_next = set()
-    for i, (lo_i, hi_i, _, zhi_i, ki, _) in enumerate(info):
+    for i, (lo_i, hi_i, _, zhi_i, ki, _, _, shi_i) in enumerate(info):
         best = None
-        for lo_j, hi_j, zlo_j, _, kj, _ in info[i + 1:]:
+        for lo_j, hi_j, zlo_j, _, kj, _, slo_j, _ in info[i + 1:]:
             gap = lo_j - hi_i
             if gap < -1.0 or gap > gap_max or kj in taken_next:
                 continue
-            dz = abs(zlo_j - zhi_i)
-            if dz <= z_tol and (best is None or gap < best[0]):
+            half = max(gap, 0.0) / 2
+            dz = abs((zhi_i + shi_i * half) - (zlo_j - slo_j * half))
+            if dz <= z_tol + 0.02 * max(gap, 0.0) and (best is None or gap < best[0]):
                 best = (gap, kj)
         if best is not None:
             taken_next.add(best[1])
             parent[root(best[1])] = root(ki)
     wire_of = np.full(n, -1)
-    roots = sorted({root(k) for *_, k, _ in info},
-                   key=lambda r: -np.median([zm for *_, k, zm in info if root(k) == r]))
+    roots = sorted({root(i[4]) for i in info},
+                   key=lambda r: -np.median([i[5] for i in info if root(i[4]) == r]))
     for w, r in enumerate(roots):
-        for *_, k, _ in info:
-            if root(k) == r:
-                wire_of[k] = w
+        for i in info:
+            if root(i[4]) == r:
+                wire_of[i[4]] = w
     return wire_of
