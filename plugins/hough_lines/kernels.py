@@ -40,29 +40,11 @@ def _build(ti, cells: int):
     flat = ti.field(ti.i32, cells)
 
     @ti.kernel
-    def vote(n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32):
-        for t in range(((n_theta + B - 1) // B) * S):
-            if t % S == 0:
-                j0 = (t // S) * B
-                if j0 + B <= n_theta:
-                    cv = ti.Vector([cs[j0 + q] for q in ti.static(range(B))])
-                    sv = ti.Vector([ss[j0 + q] for q in ti.static(range(B))])
-                    row = ti.Vector([(j0 + q) * n_rho for q in ti.static(range(B))])
-                    for i in range(n):
-                        a = ti.cast(xs[i] * cv + ys[i] * sv + off, ti.i32) + row
-                        for q in ti.static(range(B)):
-                            flat[a[q]] = flat[a[q]] + sign  # not +=: that would be atomic
-                else:  # the last, partial block
-                    for j in range(j0, n_theta):
-                        for i in range(n):
-                            a = j * n_rho + ti.cast(xs[i] * cs[j] + ys[i] * ss[j] + off, ti.i32)
-                            flat[a] = flat[a] + sign
-
-    @ti.kernel
-    def unvote(n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32,
-               row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        # subtract a band's votes, blocked like ``vote``, and mark the rows whose peak cell lost
-        # votes: only those need their maximum found again
+    def vote(n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32,
+             row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
+             track: ti.template()):
+        # ``track`` (compiled in or out): mark the rows whose peak cell (row_arg) lost votes when a
+        # band is subtracted; only those need their maximum found again
         for t in range(((n_theta + B - 1) // B) * S):
             if t % S == 0:
                 j0 = (t // S) * B
@@ -75,21 +57,24 @@ def _build(ti, cells: int):
                     for i in range(n):
                         a = ti.cast(xs[i] * cv + ys[i] * sv + off, ti.i32) + row
                         for q in ti.static(range(B)):
-                            flat[a[q]] = flat[a[q]] - 1
-                            hit[q] |= ti.cast(a[q] == peak[q], ti.i32)
-                    for q in ti.static(range(B)):
-                        if hit[q]:
-                            dirty[j0 + q] = 1
-                else:
+                            flat[a[q]] = flat[a[q]] + sign  # not +=: that would be atomic
+                            if ti.static(track):
+                                hit[q] |= ti.cast(a[q] == peak[q], ti.i32)
+                    if ti.static(track):
+                        for q in ti.static(range(B)):
+                            if hit[q]:
+                                dirty[j0 + q] = 1
+                else:  # the last, partial block
                     for j in range(j0, n_theta):
                         hit = 0
                         for i in range(n):
                             k = ti.cast(xs[i] * cs[j] + ys[i] * ss[j] + off, ti.i32)
-                            flat[j * n_rho + k] = flat[j * n_rho + k] - 1
-                            if k == row_arg[j]:
-                                hit = 1
-                        if hit:
-                            dirty[j] = 1
+                            flat[j * n_rho + k] = flat[j * n_rho + k] + sign
+                            if ti.static(track):
+                                hit |= ti.cast(k == row_arg[j], ti.i32)
+                        if ti.static(track):
+                            if hit:
+                                dirty[j] = 1
 
     @ti.kernel
     def row_peaks(n_theta: ti.i32, n_rho: ti.i32, dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -136,7 +121,7 @@ def _build(ti, cells: int):
     def set_cell(i: ti.i32, v: ti.i32):
         flat[i] = v
 
-    return dict(vote=vote, unvote=unvote, row_peaks=row_peaks, load_points=load_points, load_thetas=load_thetas,
+    return dict(vote=vote, row_peaks=row_peaks, load_points=load_points, load_thetas=load_thetas,
                 clear=clear, copy_out=copy_out, set_cell=set_cell)
 
 
@@ -179,13 +164,12 @@ class TaichiAccumulator:
             xp = np.ascontiguousarray(x[s:s + POINTS_PER_PASS])
             yp = np.ascontiguousarray(y[s:s + POINTS_PER_PASS])
             self.k["load_points"](xp, yp)
-            if sign < 0 and len(xp) * n_theta < 50_000_000:
-                # a band's votes: also flags the rows whose peak cell changed
-                self.k["unvote"](len(xp), n_theta, n_rho, float(self.off), self._row_arg, self._dirty)
+            if sign < 0:  # a band's votes: also flags the rows whose peak cell changed
+                self.k["vote"](len(xp), n_theta, n_rho, float(self.off), -1, self._row_arg, self._dirty, True)
             else:
-                self.k["vote"](len(xp), n_theta, n_rho, float(self.off), int(sign))
+                self.k["vote"](len(xp), n_theta, n_rho, float(self.off), 1, self._row_arg, self._dirty, False)
                 self._dirty[:] = 1
-                self._stale_up |= sign > 0
+                self._stale_up = True
 
     def peak(self) -> tuple[int, int, int]:
         dirty = self._dirty.astype(bool)
