@@ -19,6 +19,19 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 
+def occupied_cells(x, y, cell: float) -> int:
+    """How many ``cell``-sized squares hold a point (an occupancy grid: no sort of all points)."""
+    x0, y0 = np.floor(x.min() / cell), np.floor(y.min() / cell)
+    c = (x / cell - x0).astype(np.int64)
+    r = (y / cell - y0).astype(np.int64)
+    cols, rows = int(c.max()) + 1, int(r.max()) + 1
+    if rows * cols > 400_000_000:  # a sparse survey over a huge extent: count distinct cells instead
+        return len(np.unique(r * cols + c))
+    occ = np.zeros(rows * cols, bool)
+    occ[r * cols + c] = True
+    return int(np.count_nonzero(occ))
+
+
 def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
                   surface_density: float | None = None, max_axis_slope: float = 0.7):
     """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.

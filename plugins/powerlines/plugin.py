@@ -11,20 +11,6 @@ REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vest
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
 
 
-def _occupied_square_metres(x, y) -> int:
-    """How many 1 m cells hold a point (an occupancy grid: no sort of all the points)."""
-    import numpy as np
-
-    x0, y0 = np.floor(x.min()), np.floor(y.min())
-    cols = int(np.floor(x.max() - x0)) + 1
-    rows = int(np.floor(y.max() - y0)) + 1
-    if rows * cols > 400_000_000:  # a sparse survey over a huge extent: count distinct cells instead
-        return len(np.unique((np.floor(x - x0).astype(np.int64) * rows + np.floor(y - y0).astype(np.int64))))
-    occ = np.zeros(rows * cols, bool)
-    occ[(y - y0).astype(np.int64) * cols + (x - x0).astype(np.int64)] = True
-    return int(np.count_nonzero(occ))
-
-
 def _run(inputs, params, ctx):
     import time
 
@@ -32,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import conductors_3d, shape_classes
+    from .core import conductors_3d, occupied_cells, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -66,7 +52,7 @@ def _run(inputs, params, ctx):
                         "above ground; check height_min_m / height_max_m")
     xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
     # the survey's surface density: points per occupied square metre (corridor strips included)
-    surface_density = len(pc) / max(_occupied_square_metres(pc.x * hu, pc.y * hu), 1)
+    surface_density = len(pc) / max(occupied_cells(pc.x * hu, pc.y * hu, 1.0), 1)
     if rn is not None and np.any(rn > 0) and params["first_returns_only"]:
         surface_density *= float(np.mean(rn == 1))
     linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
