@@ -106,6 +106,7 @@ def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m
     """The method's iterative peak extraction: take the largest cell, validate its inverse-Hough
     points, subtract the band's votes, until the largest cell is below ``min_votes``."""
     bin_cs, bin_ss, bin_off = bin_scales(cos_t, sin_t, k_min, 1.0 / rho_step_m)
+    x32, y32 = x.astype(np.float32), y.astype(np.float32)  # the accumulator's precision, once per tile
     active = np.ones(len(x), bool)
     lines: list[HoughLine] = []
     for _ in range(max_lines * 4):
@@ -114,7 +115,7 @@ def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m
             break
         rho_p = (r + k_min) * rho_step_m
         rho_pts = x * cos_t[c] + y * sin_t[c]
-        k_pts = bin_index(x, y, bin_cs[c], bin_ss[c], bin_off)  # as the accumulator bins them
+        k_pts = bin_index(x32, y32, bin_cs[c], bin_ss[c], bin_off)  # as the accumulator bins them
         inverse = np.flatnonzero(active & (k_pts == r))
         band = np.flatnonzero(active & (np.abs(rho_pts - rho_p) <= band_m))
         # along-line positions: t = -x sinθ + y cosθ
