@@ -25,6 +25,8 @@ THETA_BLOCK = 16
 TASK_STRIDE = 512
 POINTS_PER_PASS = 1 << 20  # points are voted in passes of at most this many
 MAX_THETAS = 1 << 15  # 0.0055° steps at the finest
+SERIAL_SCAN_CELLS = 1 << 18  # fewer cells than this are rescanned in one thread (CPU)
+RESCAN_BATCH = 64  # dirty rows rescanned in the first batch of a peak search
 CELLS = 1 << 24  # accumulator cells of the standard kit (64 MiB); larger ones get their own
 
 _kits: dict = {}
@@ -33,6 +35,7 @@ _busy = [False]
 
 def _build(ti, cells: int):
     B, S = THETA_BLOCK, TASK_STRIDE
+    on_cpu = ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
     xs = ti.field(ti.f32, POINTS_PER_PASS)
     ys = ti.field(ti.f32, POINTS_PER_PASS)
     cs = ti.field(ti.f32, MAX_THETAS)
@@ -40,11 +43,19 @@ def _build(ti, cells: int):
     flat = ti.field(ti.i32, cells)
 
     @ti.kernel
-    def vote(n: ti.i32, n_theta: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32,
+    def vote(xa: ti.types.ndarray(dtype=ti.f32, ndim=1), ya: ti.types.ndarray(dtype=ti.f32, ndim=1),
+             n_theta: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32,
              row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
              track: ti.template()):
         # ``track`` (compiled in or out): mark the rows whose peak cell (row_arg) lost votes when a
         # band is subtracted; only those need their maximum found again
+        n = xa.shape[0]
+        # the points are copied into the fields; on the CPU in the launching thread (handing a loop
+        # to the thread pool costs about 0.1 ms, and most votes are a band of a few hundred points)
+        ti.loop_config(serialize=on_cpu)
+        for i in range(n):
+            xs[i] = xa[i]
+            ys[i] = ya[i]
         for t in range(((n_theta + B - 1) // B) * S):
             if t % S == 0:
                 j0 = (t // S) * B
@@ -78,9 +89,13 @@ def _build(ti, cells: int):
 
     @ti.kernel
     def row_peaks(n_theta: ti.i32, n_rho: ti.i32, dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  row_max: ti.types.ndarray(dtype=ti.i32, ndim=1), row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+                  row_max: ti.types.ndarray(dtype=ti.i32, ndim=1), row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  serial: ti.template()):
         # per dirty θ row: its largest count and the first ρ bin holding it (4 iterations per
-        # row, one working: see TASK_STRIDE); a branch-free max, then the first match
+        # row, one working: see TASK_STRIDE); a branch-free max, then the first match.
+        # ``serial``: a few rows are scanned in the launching thread: handing a loop to the CPU
+        # thread pool costs about 0.1 ms, more than scanning a few dozen rows
+        ti.loop_config(serialize=serial)
         for t in range(n_theta * 4):
             if t % 4 == 0 and dirty[t // 4] != 0:
                 j = t // 4
@@ -94,12 +109,6 @@ def _build(ti, cells: int):
                 row_max[j] = best
                 row_arg[j] = arg
                 dirty[j] = 0
-
-    @ti.kernel
-    def load_points(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1)):
-        for i in range(a.shape[0]):
-            xs[i] = a[i]
-            ys[i] = b[i]
 
     @ti.kernel
     def load_thetas(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1)):
@@ -121,7 +130,7 @@ def _build(ti, cells: int):
     def set_cell(i: ti.i32, v: ti.i32):
         flat[i] = v
 
-    return dict(vote=vote, row_peaks=row_peaks, load_points=load_points, load_thetas=load_thetas,
+    return dict(vote=vote, row_peaks=row_peaks, load_thetas=load_thetas,
                 clear=clear, copy_out=copy_out, set_cell=set_cell)
 
 
@@ -148,6 +157,7 @@ class TaichiAccumulator:
         if _busy[0]:
             raise RuntimeError("a TaichiAccumulator is already open in this process; close it first")
         self.k = _kit(ti, self.size)
+        self.on_cpu = ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
         self.k["load_thetas"](cs, ss)
         self.k["clear"](self.size)
         self._row_max = np.zeros(self.shape[0], np.int32)
@@ -163,28 +173,39 @@ class TaichiAccumulator:
         for s in range(0, len(x), POINTS_PER_PASS):
             xp = np.ascontiguousarray(x[s:s + POINTS_PER_PASS])
             yp = np.ascontiguousarray(y[s:s + POINTS_PER_PASS])
-            self.k["load_points"](xp, yp)
             if sign < 0:  # a band's votes: also flags the rows whose peak cell changed
-                self.k["vote"](len(xp), n_theta, n_rho, float(self.off), -1, self._row_arg, self._dirty, True)
+                self.k["vote"](xp, yp, n_theta, n_rho, float(self.off), -1, self._row_arg, self._dirty, True)
             else:
-                self.k["vote"](len(xp), n_theta, n_rho, float(self.off), 1, self._row_arg, self._dirty, False)
+                self.k["vote"](xp, yp, n_theta, n_rho, float(self.off), 1, self._row_arg, self._dirty, False)
                 self._dirty[:] = 1
                 self._stale_up = True
 
     def peak(self) -> tuple[int, int, int]:
         dirty = self._dirty.astype(bool)
-        if dirty.any():
-            if self._stale_up:  # after votes were added, old maxima bound nothing: rescan them all
-                rescan = dirty
-            else:
-                # subtraction only lowers counts, so a dirty row's old maximum bounds its new one:
-                # only rows that could still hold (or tie) the largest count are rescanned
-                clean = self._row_max[~dirty]
-                rescan = dirty & (self._row_max >= (clean.max() if len(clean) else np.iinfo(np.int32).min))
-            self._dirty[:] = rescan
-            self.k["row_peaks"](self.shape[0], self.shape[1], self._dirty, self._row_max, self._row_arg)
-            self._dirty[:] = dirty & ~rescan
+        if self._stale_up:  # after votes were added, old maxima bound nothing: rescan them all
+            self.k["row_peaks"](self.shape[0], self.shape[1], self._dirty, self._row_max, self._row_arg, False)
+            dirty[:] = False
             self._stale_up = False
+        # subtraction only lowers counts, so a dirty row's old maximum bounds its new one: only
+        # rows that could still hold (or tie) the largest count are rescanned, the highest bounds
+        # first, in batches that double (dirty rows pile up over the peaks; rescanning all that
+        # beat the clean rows' best cost 2-4 full accumulator scans per tile on AHN4)
+        batch = RESCAN_BATCH
+        while dirty.any():
+            clean = self._row_max[~dirty]
+            best = clean.max() if len(clean) else np.iinfo(np.int32).min
+            cand = np.flatnonzero(dirty & (self._row_max >= best))
+            if len(cand) == 0:
+                break
+            if len(cand) > batch:
+                cand = cand[np.argpartition(self._row_max[cand], len(cand) - batch)[-batch:]]
+                batch *= 2
+            self._dirty[:] = 0
+            self._dirty[cand] = 1
+            serial = self.on_cpu and len(cand) * self.shape[1] <= SERIAL_SCAN_CELLS
+            self.k["row_peaks"](self.shape[0], self.shape[1], self._dirty, self._row_max, self._row_arg, serial)
+            dirty[cand] = False
+        self._dirty[:] = dirty
         c = int(np.argmax(self._row_max))  # first row holding the maximum: numpy's flat argmax order
         return c, int(self._row_arg[c]), int(self._row_max[c])
 
