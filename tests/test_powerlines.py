@@ -15,7 +15,7 @@ from toolbox import kernels
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import catenary, fit_catenary, split_spans
+from toolbox_plugins.powerlines.core import _two_means_1d, catenary, fit_catenary, split_spans
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -70,6 +70,22 @@ def test_taichi_accumulator_equals_numpy_reference(n, seed, theta_step):
             b.vote(x[near], y[near], -1)
             left = np.setdiff1d(left, near)
             assert a.peak() == b.peak()
+
+
+@pytest.mark.parametrize("x0, y0", [(0, 0), (-110, 0), (-55, -55), (0, -110)])
+def test_accumulator_rho_range_holds_every_vote_and_no_more(x0, y0):
+    """The ρ range is the method's min/max computed ρ: every point binned at every θ falls
+    inside it (a vote outside would land in the next θ row), and the outermost bins are used."""
+    rng = np.random.default_rng(3)
+    x = np.r_[x0 + rng.uniform(0, 110, 3000), x0, x0 + 110, x0, x0 + 110]
+    y = np.r_[y0 + rng.uniform(0, 110, 3000), y0, y0, y0 + 110, y0 + 110]
+    thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
+    cs, ss, off = reference.bin_scales(np.cos(thetas), np.sin(thetas), k_min, 10.0)
+    k = reference.bin_index(x[:, None], y[:, None], cs[None, :], ss[None, :], off)
+    assert k.min() >= 0 and k.max() < rows
+    assert k.min() <= 3 and k.max() >= rows - 4
+    if (x0, y0) == (0, 0):  # a tile at its own origin: [-max y, max r], not ±max r
+        assert rows < 0.9 * (2 * np.hypot(110, 110) / 0.1)
 
 
 @pytest.mark.parametrize("batch", [1, 64])
@@ -376,3 +392,20 @@ def test_closed_form_eigen_matches_numpy():
     separated = ev[:, 2] - ev[:, 1] > 1e-6 * ev[:, 2]
     assert np.abs(np.sum(axes * vec[:, :, 2], axis=1))[separated].min() > 1 - 1e-9
     assert np.allclose(np.abs(axes[:10, 0]), 1.0)  # the line's own direction
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_two_means_split_is_the_best_cut(seed):
+    """The bundle splitter's 1D two-means: the cut of least within-group sum of squares among
+    all cuts leaving min_size values on each side (checked by trying every cut)."""
+    rng = np.random.default_rng(seed)
+    r = np.r_[rng.normal(0, 0.05, 40 + 10 * seed), rng.normal(0.3 + 0.1 * seed, 0.05, 60)]
+    rng.shuffle(r)
+    upper, c0, c1, sd = _two_means_1d(r, 20)
+    v = np.sort(r)
+    costs = [((v[:k] - v[:k].mean()) ** 2).sum() + ((v[k:] - v[k:].mean()) ** 2).sum() for k in range(20, len(v) - 19)]
+    k = 20 + int(np.argmin(costs))
+    assert upper.sum() == len(v) - k and r[upper].min() >= r[~upper].max()
+    assert c0 == pytest.approx(v[:k].mean()) and c1 == pytest.approx(v[k:].mean())
+    assert sd == pytest.approx(np.sqrt(min(costs) / len(v)))
+    assert _two_means_1d(r[:39], 20) is None  # too few for two groups of 20

@@ -36,11 +36,19 @@ class AccumulatorTooLarge(ValueError):
 
 
 def accumulator_shape(x, y, rho_step: float, theta_step_deg: float):
+    """(θ values, first ρ bin, number of ρ bins). The ρ range is the method's: from the smallest
+    to the largest ρ any point takes at any θ in [-90°, 90°] (a point right of the origin spans
+    [-|y|, r], one left of it [-r, |y|]); for a tile shifted to its minimum x, y that is
+    [-max y, max r], about 15 % narrower than ±max r."""
     thetas = np.deg2rad(np.arange(-90.0, 90.0 - 1e-9, theta_step_deg))
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
     r = np.hypot(x, y)
-    rmax = float(r.max()) if len(r) else 0.0
-    k_min = int(np.floor(-rmax / rho_step + 0.5)) - 1
-    k_max = int(np.floor(rmax / rho_step + 0.5)) + 1
+    right = x >= 0
+    rho_lo = float(np.min(np.where(right, -np.abs(y), -r))) if len(r) else 0.0
+    rho_hi = float(np.max(np.where(right, r, np.abs(y)))) if len(r) else 0.0
+    k_min = int(np.floor(rho_lo / rho_step + 0.5)) - 1
+    k_max = int(np.floor(rho_hi / rho_step + 0.5)) + 1
     return thetas, k_min, k_max - k_min + 1
 
 

@@ -307,19 +307,37 @@ def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: i
                 continue
             trend = np.polyval(np.polyfit(s[m], off[m], 1), s[m])
             r = off[m] - trend
-            c = np.array([np.percentile(r, 25), np.percentile(r, 75)])
-            for _ in range(20):
-                side = np.abs(r - c[0]) > np.abs(r - c[1])
-                if side.all() or (~side).all():
-                    break
-                c = np.array([r[~side].mean(), r[side].mean()])
-            if side.all() or (~side).all() or min(side.sum(), (~side).sum()) < min_points:
+            split = _two_means_1d(r, min_points)
+            if split is None:
                 continue
-            sd = np.sqrt((r[~side].var() * (~side).sum() + r[side].var() * side.sum()) / len(r))
-            if abs(c[1] - c[0]) >= max(min_gap, 4 * sd):
+            side, c0, c1, sd = split
+            if c1 - c0 >= max(min_gap, 4 * sd):
                 lab[m[side]] = nxt
                 nxt += 1
     return lab
+
+
+def _two_means_1d(r: np.ndarray, min_size: int):
+    """The best split of values ``r`` into a lower and an upper group (least within-group sum of
+    squares: exact 2-means in one dimension, every cut of the sorted values tried through prefix
+    sums), each of at least ``min_size`` values. Returns (upper-group mask, lower mean, upper
+    mean, pooled standard deviation) or None when no such split exists."""
+    n = len(r)
+    if n < 2 * min_size:
+        return None
+    order = np.argsort(r, kind="stable")
+    v = r[order]
+    cs, cs2 = np.cumsum(v), np.cumsum(v * v)
+    k = np.arange(min_size, n - min_size + 1)  # size of the lower group
+    lo_s, lo_s2 = cs[k - 1], cs2[k - 1]
+    hi_s, hi_s2 = cs[-1] - lo_s, cs2[-1] - lo_s2
+    sse = (lo_s2 - lo_s * lo_s / k) + (hi_s2 - hi_s * hi_s / (n - k))
+    best = int(np.argmin(sse))
+    kb = int(k[best])
+    upper = np.zeros(n, bool)
+    upper[order[kb:]] = True
+    sd = float(np.sqrt(max(sse[best], 0.0) / n))
+    return upper, float(lo_s[best] / kb), float(hi_s[best] / (n - kb)), sd
 
 
 def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float, slope_window: float = 10.0) -> np.ndarray:
