@@ -42,6 +42,16 @@ def test_geotiff_crs_nodata_overviews_and_style(tmp_path):
     assert back.cell_size == 0.5
 
 
+def test_small_geotiff_is_one_tile_that_just_covers_it(tmp_path):
+    data = np.arange(52 * 40, dtype=np.float32).reshape(40, 52)
+    r = Raster(data, Affine(1.0, 0, 512000, 0, -1.0, 5404000), crs=parse_crs("EPSG:25832"), nodata=float("nan"))
+    out = write_raster(r, tmp_path / "small.tif")
+    with rasterio.open(out) as ds:
+        assert ds.block_shapes[0] == (64, 64)
+        assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG"
+        np.testing.assert_array_equal(ds.read(1), data)
+
+
 def test_geopackage_layers_with_styles_as_qgis_queries_them(tmp_path):
     crs = parse_crs("EPSG:25832")
     lines = gpd.GeoDataFrame({"votes": [10, 20]}, geometry=[LineString([(0, 0), (1, 1)]), LineString([(0, 1), (1, 0)])], crs=crs)
