@@ -121,6 +121,34 @@ def test_dtm_from_ground_is_unbiased_on_a_steep_plane():
     np.testing.assert_allclose(dtm, truth, atol=1e-6)
 
 
+def test_dtm_from_ground_fits_each_cells_3x3_block_like_lstsq():
+    """Cells with few own points (< 6) take the least-squares plane of their 3x3 block's points,
+    evaluated at the cell centre: the box-sum moments must give what a direct fit gives, also
+    far from the origin (a grid 40 km east)."""
+    rng = np.random.default_rng(1)
+    west, north, cell = 40000.0, 5000.0, 1.0
+    n_cells = 20
+    x = west + rng.uniform(0, n_cells, 1600)
+    y = north - rng.uniform(0, n_cells, 1600)  # about 4 points per cell
+    z = 50 + 0.3 * (x - west) - 0.2 * (y - north) + 0.01 * (x - west) * (y - north) + rng.normal(0, 0.02, len(x))
+    grid = core.Grid(west, north, cell, n_cells, n_cells)
+    dtm, support = core.dtm_from_ground(grid, x, y, z)
+    r, c = grid.index(x, y)
+    own = np.bincount(r * n_cells + c, minlength=n_cells * n_cells).reshape(n_cells, n_cells)
+    xs, ys = grid.centres()
+    checked = 0
+    for i in range(1, n_cells - 1):
+        for j in range(1, n_cells - 1):
+            if own[i, j] >= 6 or own[i, j] == 0:
+                continue
+            m = (np.abs(r - i) <= 1) & (np.abs(c - j) <= 1)
+            A = np.column_stack([np.ones(m.sum()), x[m] - xs[j], y[m] - ys[i]])
+            coef = np.linalg.lstsq(A, z[m], rcond=None)[0]
+            assert dtm[i, j] == pytest.approx(coef[0], abs=1e-9)
+            checked += 1
+    assert checked >= 100 and support.all()
+
+
 def test_multiscale_opening_removes_by_size_and_height():
     surf = np.zeros((100, 100))
     surf[20:30, 20:30] = 5.0  # a 10 m building, 5 m high: removed

@@ -301,29 +301,22 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, doma
     points or a degenerate fit are holes, filled harmonically. Returns (dtm, support) where
     support marks cells computed from points (not interpolated).
     """
-    shape = (grid.rows, grid.cols)
-    # moments about each point's own cell centre, shifted to the neighbourhood's centre cell:
-    # sums over the 3x3 block of (dx + ox) etc. are rebuilt from per-cell sums of 1, dx, dy, ...
     S = (moments or cell_moments)(grid, x, y, z)
-    zz_cells = S.pop("zz")
-    # neighbour offsets (in units) of each of the 9 cells relative to the centre cell
-    tot = {k: np.zeros(shape) for k in ("n", "x", "y", "z", "xx", "yy", "xy", "xz", "yz")}
-    pad = {k: np.pad(v, 1) for k, v in S.items()}
     cell = grid.cell
-    for dr in (-1, 0, 1):
-        for dc in (-1, 0, 1):
-            ox, oy = dc * cell, -dr * cell
-            blk = {k: v[1 + dr:1 + dr + grid.rows, 1 + dc:1 + dc + grid.cols] for k, v in pad.items()}
-            n_, sx, sy, sz = blk["n"], blk["x"], blk["y"], blk["z"]
-            tot["n"] += n_
-            tot["x"] += sx + ox * n_
-            tot["y"] += sy + oy * n_
-            tot["z"] += sz
-            tot["xx"] += blk["xx"] + 2 * ox * sx + ox * ox * n_
-            tot["yy"] += blk["yy"] + 2 * oy * sy + oy * oy * n_
-            tot["xy"] += blk["xy"] + ox * sy + oy * sx + ox * oy * n_
-            tot["xz"] += blk["xz"] + ox * sz
-            tot["yz"] += blk["yz"] + oy * sz
+    # the per-cell sums are about each cell's own centre; moved to one frame (origin at the grid's
+    # middle cell: small numbers) they add up over each 3x3 block as plain box sums, and are then
+    # moved back to the block's centre cell (exact algebra: sums of (u + o)^k expanded)
+    cu = ((np.arange(grid.cols) - grid.cols // 2) * cell)[None, :]
+    cv = (-(np.arange(grid.rows) - grid.rows // 2) * cell)[:, None]
+    n0, sx, sy, sz = S["n"], S["x"], S["y"], S["z"]
+    B = {k: _box3_sum(v) for k, v in (
+        ("n", n0), ("z", sz), ("zz", S["zz"]), ("x", sx + cu * n0), ("y", sy + cv * n0),
+        ("xx", S["xx"] + (2 * sx + cu * n0) * cu), ("yy", S["yy"] + (2 * sy + cv * n0) * cv),
+        ("xy", S["xy"] + cu * sy + cv * sx + cu * cv * n0), ("xz", S["xz"] + cu * sz), ("yz", S["yz"] + cv * sz))}
+    nb, bx, by, bz = B["n"], B["x"], B["y"], B["z"]
+    tot = {"n": nb, "z": bz, "x": bx - cu * nb, "y": by - cv * nb,
+           "xx": B["xx"] - (2 * bx - cu * nb) * cu, "yy": B["yy"] - (2 * by - cv * nb) * cv,
+           "xy": B["xy"] - cu * by - cv * bx + cu * cv * nb, "xz": B["xz"] - cu * bz, "yz": B["yz"] - cv * bz}
     n_ = tot["n"]
     a, det = _plane_value_at_centre(tot)
     # the same fit on the cell's own points: sharper in ditches and at breaklines, used where the
@@ -341,7 +334,7 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, doma
     # it within the heights of the points around the cell
     # (bounds from the neighbourhood's mean and spread: cheaper than per-cell min/max scatters)
     with np.errstate(invalid="ignore", divide="ignore"):
-        zz = ndimage.uniform_filter(zz_cells, 3, mode="constant") * 9.0
+        zz = B["zz"]
         mean3 = tot["z"] / n_
         sd3 = np.sqrt(np.maximum(zz / n_ - mean3 * mean3, 0.0))
     zlo = mean3 - 2.5 * sd3 - 0.5 * cell
@@ -349,6 +342,17 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, doma
     value = np.where(np.isfinite(value) & np.isfinite(mean3), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
     return fill_holes(value, known, domain), known
+
+
+def _box3_sum(a: np.ndarray) -> np.ndarray:
+    """Sum over each cell's 3x3 neighbourhood (zero outside the grid), separably."""
+    s = a.copy()
+    s[1:] += a[:-1]
+    s[:-1] += a[1:]
+    t = s.copy()
+    t[:, 1:] += s[:, :-1]
+    t[:, :-1] += s[:, 1:]
+    return t
 
 
 def _plane_value_at_centre(m: dict):
