@@ -134,4 +134,9 @@ def _rio_crs(crs):
 
     if isinstance(crs, RioCRS):
         return crs
+    # by its EPSG code when it has one exactly: GDAL then writes the GeoTIFF keys without
+    # identifying the WKT against the PROJ database (5 ms instead of 10-15 ms per file)
+    auth = crs.to_authority(min_confidence=100)
+    if auth is not None and auth[0] == "EPSG":
+        return RioCRS.from_epsg(int(auth[1]))
     return RioCRS.from_wkt(crs.to_wkt())
