@@ -42,14 +42,17 @@ def test_geotiff_crs_nodata_overviews_and_style(tmp_path):
     assert back.cell_size == 0.5
 
 
-def test_small_geotiff_is_one_tile_that_just_covers_it(tmp_path):
+def test_small_geotiff_is_one_tile_that_just_covers_it(tmp_path, caplog):
+    """One 128-pixel tile (the smallest the COG driver takes without a warning) for a small
+    raster, not a 512-pixel tile that is mostly padding."""
     data = np.arange(52 * 40, dtype=np.float32).reshape(40, 52)
     r = Raster(data, Affine(1.0, 0, 512000, 0, -1.0, 5404000), crs=parse_crs("EPSG:25832"), nodata=float("nan"))
     out = write_raster(r, tmp_path / "small.tif")
     with rasterio.open(out) as ds:
-        assert ds.block_shapes[0] == (64, 64)
+        assert ds.block_shapes[0] == (128, 128)
         assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG"
         np.testing.assert_array_equal(ds.read(1), data)
+    assert not [rec for rec in caplog.records if rec.levelname in ("WARNING", "ERROR")]
 
 
 def test_geopackage_layers_with_styles_as_qgis_queries_them(tmp_path):

@@ -107,9 +107,9 @@ def write_raster(r: Raster, path: str | os.PathLike, style_dirs=(), overwrite: b
         "crs": _rio_crs(r.crs), "nodata": r.nodata,
     }
     predictor = 3 if bands.dtype.kind == "f" else 2
-    # 512-pixel tiles, or one tile just covering a small raster: compressing a 512 x 512 tile
-    # that is mostly padding cost 8 ms for a 52 x 52 DTM, more than the rest of writing it
-    block = int(min(512, max(16, 1 << int(np.ceil(np.log2(max(rows, cols)))))))
+    # 512-pixel tiles, or one (>= 128, the COG driver's least) just covering a small raster: a
+    # 512 x 512 tile that is mostly padding cost 8 ms for a 52 x 52 DTM, more than all the rest
+    block = int(min(512, max(128, 1 << int(np.ceil(np.log2(max(rows, cols)))))))
     with atomic_path(path, overwrite) as tmp:
         with MemoryFile() as mem:
             with mem.open(**profile) as ds:
