@@ -409,3 +409,11 @@ def test_two_means_split_is_the_best_cut(seed):
     assert c0 == pytest.approx(v[:k].mean()) and c1 == pytest.approx(v[k:].mean())
     assert sd == pytest.approx(np.sqrt(min(costs) / len(v)))
     assert _two_means_1d(r[:39], 20) is None  # too few for two groups of 20
+
+
+def test_accumulator_refuses_a_rho_range_without_zero():
+    """Padding θ rows (cos = sin = 0) vote in the ρ = 0 bin: a range without it would spill
+    their votes into a real row, so it is refused."""
+    t = np.radians(np.arange(-90, 90, 1.0))
+    with pytest.raises(ValueError, match="must include ρ = 0"):
+        hough_kernels.TaichiAccumulator(kernels.taichi(), np.cos(t), np.sin(t), 5, 10.0, 100)

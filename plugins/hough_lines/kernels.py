@@ -142,6 +142,8 @@ class TaichiAccumulator:
         if rows * self.shape[1] >= 2**31 or rows > MAX_THETAS:
             raise ValueError(f"a {self.shape[0]} x {self.shape[1]} accumulator exceeds the kernel's limits "
                              f"(2^31 cells, {MAX_THETAS} θ steps)")
+        if not 0 <= int(self.off) < self.shape[1]:  # padding rows (cos = sin = 0) vote in the ρ = 0 bin
+            raise ValueError(f"the ρ range (bins {k_min}..{k_min + self.shape[1] - 1}) must include ρ = 0")
         if _busy[0]:
             raise RuntimeError("a TaichiAccumulator is already open in this process; close it first")
         self.k = _kit(ti, rows * self.shape[1])
