@@ -210,11 +210,12 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     """Wires and their catenary spans along each 2D line.
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points. Returns
-    (spans, wire_point_index) where wire_point_index maps point index -> (line, wire).
+    (spans, line_of, wire_of): per point the line and the wire it belongs to (-1: none).
     """
     tree = cKDTree(np.column_stack([px, py]))
     spans: list[Span] = []
-    members = {}
+    line_of = np.full(len(px), -1, np.int64)
+    wire_of_point = np.full(len(px), -1, np.int64)
     # each point belongs to the nearest 2D line (bands of neighbouring lines overlap)
     owner = np.full(len(px), -1)
     best = np.full(len(px), np.inf)
@@ -288,9 +289,9 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                 spans.append(Span(li, wire, j, s0, c, z0, a, b, rms, int(sel.sum()), sag, float(o0), float(o1)))
                 if rms <= max_rms:  # points of a span that is not a wire are not wire points
                     resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
-                    for i in ik[sel][resid <= max(3 * rms, 0.15)]:
-                        members[int(i)] = (li, wire)
-    return spans, members
+                    on = ik[sel][resid <= max(3 * rms, 0.15)]
+                    line_of[on], wire_of_point[on] = li, wire
+    return spans, line_of, wire_of_point
 
 
 def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:

@@ -82,9 +82,9 @@ def _run(inputs, params, ctx):
         d = np.array([bx - ax, by - ay]) * hu
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
-    spans, members = conductors_3d(geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"],
-                                   z_link=1.0, s_link=2 * params["v_max_m"], min_span=params["s_min_m"],
-                                   max_rms=params["max_rms_3d_m"])
+    spans, line_of, wire_of_pt = conductors_3d(
+        geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
+        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"])
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
     # and hangs gently (pylon members and roof edges are straight in plan but not wires)
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and
@@ -92,26 +92,28 @@ def _run(inputs, params, ctx):
     if params["validate_3d"]:
         keep_lines = sorted(good)
         remap = {old: new for new, old in enumerate(keep_lines)}
+        new_id = np.full(len(geo) + 1, -1, np.int64)  # (the last entry: -1 stays -1)
+        new_id[keep_lines] = np.arange(len(keep_lines))
+        line_of = new_id[line_of]
+        wire_of_pt[line_of < 0] = -1
         lines = _select_conductors(lines, keep_lines)
         geo = [geo[i] for i in keep_lines]
         spans = [sp for sp in spans if sp.conductor in remap]
         for sp in spans:
             sp.conductor = remap[sp.conductor]
-        members = {i: (remap[li], w) for i, (li, w) in members.items() if li in remap}
     timings["conductors_3d_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
-    wire_of = np.full(len(pc), -1)
-    for i_local, (li, w) in members.items():
-        wire_of[keep[i_local]] = li
+    conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
+    conductor_of[keep] = line_of
     for li in range(len(cond)):
-        h = hag[wire_of == li]
+        h = hag[conductor_of == li]
         hmin.append(float(h.min()) if len(h) else np.nan)
         hmax.append(float(h.max()) if len(h) else np.nan)
     cond = cond.assign(height_min_m=hmin, height_max_m=hmax,
-                       n_wires=[len({w for (l2, w) in members.values() if l2 == li}) for li in range(len(cond))])
+                       n_wires=[len(np.unique(wire_of_pt[line_of == li])) for li in range(len(cond))])
     import geopandas as gpd
 
     rows, geoms = [], []
@@ -137,7 +139,7 @@ def _run(inputs, params, ctx):
     if ctx.wants("classified"):
         cls = np.asarray(ground_cls).copy()
         cls[cls != 2] = 1
-        cls[wire_of >= 0] = 14
+        cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
     if len(cond) == 0 and len(keep) >= 200 and len(th) < 0.15 * len(keep):
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
@@ -148,7 +150,7 @@ def _run(inputs, params, ctx):
             "try --set cell_size_m=0.1", len(th), len(keep), params["cell_size_m"])
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
              "height_max_m_used": round(h_max, 2), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
-             "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((wire_of >= 0).sum()),
+             "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
 
