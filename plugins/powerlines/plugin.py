@@ -91,16 +91,15 @@ def _run(inputs, params, ctx):
             abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
     if params["validate_3d"]:
         keep_lines = sorted(good)
-        remap = {old: new for new, old in enumerate(keep_lines)}
-        new_id = np.full(len(geo) + 1, -1, np.int64)  # (the last entry: -1 stays -1)
+        new_id = np.full(len(geo) + 1, -1, np.int64)  # old conductor -> new (-1: dropped; -1 stays -1)
         new_id[keep_lines] = np.arange(len(keep_lines))
         line_of = new_id[line_of]
         wire_of_pt[line_of < 0] = -1
         lines = _select_conductors(lines, keep_lines)
         geo = [geo[i] for i in keep_lines]
-        spans = [sp for sp in spans if sp.conductor in remap]
+        spans = [sp for sp in spans if new_id[sp.conductor] >= 0]
         for sp in spans:
-            sp.conductor = remap[sp.conductor]
+            sp.conductor = int(new_id[sp.conductor])
     timings["conductors_3d_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
