@@ -18,8 +18,12 @@ Why it is written this way (each measured on the 2-core CI machine, 20 000 point
   even when the offline cache holds the machine code), so the θ rows are padded to whole blocks
   (no remainder loop), the band-subtraction flags are always computed (no second variant: the
   compare costs nothing measurable beside the scattered increments) and small steps are merged;
-- handing a loop to taichi's CPU thread pool costs about 0.1 ms, so tiny loops (copying a band's
-  few hundred points) run in the launching thread.
+- handing a loop to taichi's CPU thread pool costs about 0.1 ms (0.15 ms with the launch), about
+  what subtracting a band of 300 points costs, so a peak takes one launch: the vote kernel keeps
+  each θ row's maximum current itself (the task that owns a row rescans it when its peak cell lost
+  votes, about 15 % of the rows per band on AHN4) and the peak is an argmax over the row maxima.
+  Before, a separate rescan kernel ran 1-3 times per peak: 0.9 ms per peak on AHN4. Tiny loops
+  (copying a band's few hundred points) run in the launching thread.
 Result: 2–3 G votes/s against 0.22 G for the previous one-θ-per-thread ndarray kernel.
 """
 
@@ -31,7 +35,7 @@ THETA_BLOCK = 16
 TASK_STRIDE = 512
 POINTS_PER_PASS = 1 << 20  # points are voted in passes of at most this many
 MAX_THETAS = 1 << 15  # 0.0055° steps at the finest
-RESCAN_BATCH = 64  # dirty rows rescanned in the first batch of a peak search
+UNBOUNDED = 2**31 - 1  # the bound of a row whose counts grew
 CELLS = 1 << 24  # accumulator cells of the standard kit (64 MiB); larger ones get their own
 
 _kits: dict = {}
@@ -47,14 +51,34 @@ def _build(ti, cells: int):
     ss = ti.field(ti.f32, MAX_THETAS)
     flat = ti.field(ti.i32, cells)
 
+    # per θ row: its largest count, the first ρ bin holding it, and whether votes were taken
+    # from its peak cell since (then row_max is only an upper bound)
+    row_max = ti.field(ti.i32, MAX_THETAS)
+    row_arg = ti.field(ti.i32, MAX_THETAS)
+    dirty = ti.field(ti.i32, MAX_THETAS)
+
+    @ti.func
+    def rescan(j, n_rho):
+        # row j's largest count and the first ρ bin holding it (a branch-free max, then the
+        # first match: numpy's argmax order)
+        base = j * n_rho
+        best = flat[base]
+        for k in range(1, n_rho):
+            best = ti.max(best, flat[base + k])
+        arg = 0
+        while flat[base + arg] != best:
+            arg += 1
+        row_max[j] = best
+        row_arg[j] = arg
+        dirty[j] = 0
+
     @ti.kernel
     def vote(xa: ti.types.ndarray(dtype=ti.f32, ndim=1), ya: ti.types.ndarray(dtype=ti.f32, ndim=1),
-             n_blocks: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32,
-             row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1), dirty: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+             n_blocks: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32):
         # θ rows come in whole blocks (the accumulator is padded to a multiple of B rows, whose
         # padding rows nobody reads): one loop body, a small kernel that loads quickly.
-        # Rows whose peak cell (row_arg) is hit are flagged in ``dirty``: when a band is
-        # subtracted only those need their maximum found again.
+        # Rows whose peak cell lost votes are flagged dirty: their old maximum bounds the new one,
+        # and ``peak`` rescans only those that could still win. Added votes unbound every row.
         n = xa.shape[0]
         # the points are copied into the fields; on the CPU in the launching thread (handing a loop
         # to the thread pool costs about 0.1 ms, and most votes are a band of a few hundred points)
@@ -76,27 +100,38 @@ def _build(ti, cells: int):
                         flat[a[q]] = flat[a[q]] + sign  # not +=: that would be atomic
                     hit |= ti.cast(a == peak, ti.i32)
                 for q in ti.static(range(B)):
-                    if hit[q]:
+                    if sign > 0:  # counts went up: no bound holds, ``peak`` rescans the row
+                        row_max[j0 + q] = UNBOUNDED
+                        dirty[j0 + q] = 1
+                    elif hit[q]:
                         dirty[j0 + q] = 1
 
     @ti.kernel
-    def row_peaks(n_theta: ti.i32, n_rho: ti.i32, dirty: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  row_max: ti.types.ndarray(dtype=ti.i32, ndim=1), row_arg: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        # per dirty θ row: its largest count and the first ρ bin holding it (4 iterations per
-        # row, one working: see TASK_STRIDE); a branch-free max, then the first match
-        for t in range(n_theta * 4):
-            if t % 4 == 0 and dirty[t // 4] != 0:
-                j = t // 4
-                base = j * n_rho
-                best = flat[base]
-                for k in range(1, n_rho):
-                    best = ti.max(best, flat[base + k])
-                arg = 0
-                while flat[base + arg] != best:
-                    arg += 1
-                row_max[j] = best
-                row_arg[j] = arg
-                dirty[j] = 0
+    def peak(n_theta: ti.i32, n_rho: ti.i32) -> ti.types.vector(3, ti.i32):
+        # the first row holding the largest count, in the launching thread: subtraction only
+        # lowers counts, so a dirty row needs its rescan only while its bound could beat (or tie
+        # with a lower index) the best row known; the highest bound goes first (it likely holds
+        # the peak and lifts the bar for the rest), then the others in row order
+        c = 0
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            best, best_j, bound, bound_j = -1, -1, -1, -1
+            for j in range(n_theta):
+                v = row_max[j]
+                if dirty[j]:
+                    if v > bound:
+                        bound, bound_j = v, j
+                elif v > best:
+                    best, best_j = v, j
+            for i in range(n_theta + 1):
+                j = bound_j if i == 0 else i - 1
+                if j >= 0 and dirty[j]:
+                    if row_max[j] > best or (row_max[j] == best and j < best_j):
+                        rescan(j, n_rho)
+                        if row_max[j] > best or (row_max[j] == best and j < best_j):
+                            best, best_j = row_max[j], j
+            c = best_j
+        return ti.Vector([c, row_arg[c], row_max[c]])
 
     @ti.kernel
     def reset(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1), m: ti.i32):
@@ -105,6 +140,9 @@ def _build(ti, cells: int):
         for j in range(a.shape[0]):
             cs[j] = a[j]
             ss[j] = b[j]
+            row_max[j] = 0
+            row_arg[j] = 0
+            dirty[j] = 0
         for i in range(m):
             flat[i] = 0
 
@@ -114,10 +152,11 @@ def _build(ti, cells: int):
             out[i] = flat[i]
 
     @ti.kernel
-    def set_cell(i: ti.i32, v: ti.i32):
-        flat[i] = v
+    def clear_cell(j: ti.i32, k: ti.i32, n_rho: ti.i32):
+        flat[j * n_rho + k] = 0
+        dirty[j] = 1  # a lower count: the row's maximum still bounds it
 
-    return dict(vote=vote, row_peaks=row_peaks, reset=reset, copy_out=copy_out, set_cell=set_cell)
+    return dict(vote=vote, peak=peak, reset=reset, copy_out=copy_out, clear_cell=clear_cell)
 
 
 def _kit(ti, cells: int):
@@ -149,10 +188,6 @@ class TaichiAccumulator:
         self.k = _kit(ti, rows * self.shape[1])
         pad = np.zeros(rows - len(cs), np.float32)
         self.k["reset"](np.r_[cs, pad], np.r_[ss, pad], rows * self.shape[1])
-        self._row_max = np.zeros(rows, np.int32)
-        self._row_arg = np.zeros(rows, np.int32)
-        self._dirty = np.ones(rows, np.int32)  # rows whose (max, first bin) must be found again
-        self._stale_up = True  # whether counts may have grown since the rows were last scanned
         _busy[0] = True
 
     def vote(self, x, y, sign: int = 1) -> None:
@@ -161,46 +196,14 @@ class TaichiAccumulator:
         for s in range(0, len(x), POINTS_PER_PASS):
             xp = np.ascontiguousarray(x[s:s + POINTS_PER_PASS])
             yp = np.ascontiguousarray(y[s:s + POINTS_PER_PASS])
-            # a band's votes (sign -1) also flag the rows whose peak cell lost votes
-            self.k["vote"](xp, yp, self.blocks, self.shape[1], float(self.off), 1 if sign > 0 else -1, self._row_arg,
-                           self._dirty)
-            if sign > 0:
-                self._stale_up = True
+            self.k["vote"](xp, yp, self.blocks, self.shape[1], float(self.off), 1 if sign > 0 else -1)
 
     def peak(self) -> tuple[int, int, int]:
-        n_theta, n_rho = self.shape
-        row_max = self._row_max[:n_theta]  # (views: the padding rows are never scanned)
-        flags = self._dirty[:n_theta]
-        if self._stale_up:  # after votes were added, old maxima bound nothing: rescan them all
-            flags[:] = 1
-            self.k["row_peaks"](n_theta, n_rho, self._dirty, self._row_max, self._row_arg)
-            self._stale_up = False
-        dirty = flags.astype(bool)
-        # subtraction only lowers counts, so a dirty row's old maximum bounds its new one: only
-        # rows that could still hold (or tie) the largest count are rescanned, the highest bounds
-        # first, in batches that double (dirty rows pile up over the peaks; rescanning all that
-        # beat the clean rows' best cost 2-4 full accumulator scans per tile on AHN4)
-        batch = RESCAN_BATCH
-        while dirty.any():
-            clean = row_max[~dirty]
-            best = clean.max() if len(clean) else np.iinfo(np.int32).min
-            cand = np.flatnonzero(dirty & (row_max >= best))
-            if len(cand) == 0:
-                break
-            if len(cand) > batch:
-                cand = cand[np.argpartition(row_max[cand], len(cand) - batch)[-batch:]]
-                batch *= 2
-            flags[:] = 0
-            flags[cand] = 1
-            self.k["row_peaks"](n_theta, n_rho, self._dirty, self._row_max, self._row_arg)
-            dirty[cand] = False
-        flags[:] = dirty
-        c = int(np.argmax(row_max))  # first row holding the maximum: numpy's flat argmax order
-        return c, int(self._row_arg[c]), int(row_max[c])
+        c, r, votes = self.k["peak"](*self.shape)
+        return int(c), int(r), int(votes)
 
     def clear_cell(self, c: int, r: int) -> None:
-        self.k["set_cell"](c * self.shape[1] + r, 0)  # lowers a count: the row's bound still holds
-        self._dirty[c] = 1
+        self.k["clear_cell"](c, r, self.shape[1])
 
     def to_numpy(self) -> np.ndarray:
         out = np.empty(self.size, np.int32)  # the real rows come first
