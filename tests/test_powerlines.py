@@ -121,6 +121,26 @@ def test_peak_ties_resolve_as_numpy_argmax():
         assert a.peak()[0] == 0 and a.peak()[2] == 2
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_isolated_points_and_principal_axis_match_their_definitions(seed):
+    """The refit's shortcuts: isolated points (no neighbour within max_gap) against every pairwise
+    distance, and the closed-form principal axis against numpy's SVD."""
+    rng = np.random.default_rng(seed)
+    ang = rng.uniform(-np.pi, np.pi)
+    d = np.array([np.cos(ang), np.sin(ang)])
+    t = np.r_[rng.uniform(0, 60, 300), rng.uniform(0, 60, 8) * 3]  # a wire and scattered strays
+    pts = np.outer(t, d) + np.outer(rng.normal(0, 0.3, len(t)), [-d[1], d[0]])
+    pts = np.r_[pts, rng.uniform(-50, 200, (20, 2))]
+    dist = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(dist, np.inf)
+    truth = dist.min(axis=1) >= 2.5
+    got = hough.isolated_points(pts, 2.5)
+    assert truth.any() and np.array_equal(got, truth)
+    c = pts - pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(c, full_matrices=False)
+    assert abs(abs(hough.principal_axis(c) @ vt[0]) - 1.0) < 1e-12
+
+
 def test_a_line_peaks_where_it_should():
     t = np.linspace(0, 60, 200)
     theta = np.radians(30.0)

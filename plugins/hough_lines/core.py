@@ -63,19 +63,45 @@ def runs_along(t: np.ndarray, max_gap: float, min_length: float):
     return [(float(t[s]), float(t[e])) for s, e in zip(starts, ends) if t[e] - t[s] >= min_length]
 
 
+def principal_axis(centred: np.ndarray) -> np.ndarray:
+    """Unit vector of the largest variance of centred 2D points: the first right singular vector
+    of the SVD line fit, from the 2x2 scatter matrix in closed form."""
+    sxx, syy = float(centred[:, 0] @ centred[:, 0]), float(centred[:, 1] @ centred[:, 1])
+    sxy = float(centred[:, 0] @ centred[:, 1])
+    a = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    return np.array([np.cos(a), np.sin(a)])
+
+
+def isolated_points(pts: np.ndarray, max_gap: float) -> np.ndarray:
+    """Points with no other point closer than ``max_gap`` (bool per point). Along a line most
+    points have a neighbour next to them in the order along the principal axis, which settles
+    them without a spatial index; the rest are checked against a k-d tree."""
+    n = len(pts)
+    if n < 2:
+        return np.ones(n, bool)
+    order = np.argsort(pts @ principal_axis(pts - pts.mean(axis=0)))
+    near = np.hypot(*np.diff(pts[order], axis=0).T) < max_gap  # consecutive along the axis
+    settled = np.zeros(n, bool)
+    settled[order[1:][near]] = True
+    settled[order[:-1][near]] = True
+    rest = np.flatnonzero(~settled)
+    if len(rest):
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(pts).query(pts[rest], k=2)
+        settled[rest] = d[:, 1] < max_gap
+    return ~settled
+
+
 def fit_line(px, py, max_gap: float):
     """SVD line fit on centred points, leaving out isolated ones (no neighbour within max_gap)."""
     pts = np.column_stack([px, py])
     if len(pts) >= 3:
-        from scipy.spatial import cKDTree
-
-        d, _ = cKDTree(pts).query(pts, k=2)
-        keep = d[:, 1] < max_gap
+        keep = ~isolated_points(pts, max_gap)
         if keep.sum() >= 2:
             pts = pts[keep]
     c = pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
-    direction = vt[0] / np.linalg.norm(vt[0])
+    direction = principal_axis(pts - c)
     normal = np.array([-direction[1], direction[0]])
     resid = (pts - c) @ normal
     return c, direction, float(np.sqrt(np.mean(resid ** 2))) if len(resid) else 0.0
