@@ -413,6 +413,25 @@ def test_closed_form_eigen_matches_numpy():
     assert np.allclose(np.abs(axes[:10, 0]), 1.0)  # the line's own direction
 
 
+def test_neighbourhood_covariances_equal_centred_products():
+    """The gathered-offsets covariance against the textbook centred product, on a cloud 300 m
+    from its origin (offsets from each point keep E[ab] - E[a]E[b] exact)."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines.core import neighbourhood_covariances
+
+    rng = np.random.default_rng(9)
+    xyz = rng.uniform(0, 40, (3000, 3)) * [1, 1, 0.3] + 300.0
+    xyz[:50] = [320.0, 320.0, 310.0] + np.outer(np.linspace(0, 10, 50), [1, 0.2, 0])  # a line
+    _, idx = cKDTree(xyz).query(xyz, k=12)
+    nb = xyz[idx]
+    c = nb - nb.mean(axis=1, keepdims=True)
+    ref = np.matmul(c.transpose(0, 2, 1), c) / 12
+    got = neighbourhood_covariances(xyz, idx)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    assert np.array_equal(got, got.transpose(0, 2, 1))
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_two_means_split_is_the_best_cut(seed):
     """The bundle splitter's 1D two-means: the cut of least within-group sum of squares among
