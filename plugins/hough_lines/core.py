@@ -102,6 +102,8 @@ def fit_line(px, py, max_gap: float):
             pts = pts[keep]
     c = pts.mean(axis=0)
     direction = principal_axis(pts - c)
+    if direction[0] > 0 or (direction[0] == 0 and direction[1] > 0):
+        direction = -direction  # one orientation per line (westward), whatever the solver's sign
     normal = np.array([-direction[1], direction[0]])
     resid = (pts - c) @ normal
     return c, direction, float(np.sqrt(np.mean(resid ** 2))) if len(resid) else 0.0
