@@ -141,7 +141,7 @@ def test_isolated_points_and_principal_axis_match_their_definitions(seed):
     assert abs(abs(hough.principal_axis(c) @ vt[0]) - 1.0) < 1e-12
     # one orientation per line, whichever way the points come (the 3D step measures s along it)
     d1 = hough.fit_line(pts[:300, 0], pts[:300, 1], 2.5)[1]
-    d2 = hough.fit_line(-pts[:300, 0][::-1] * -1, pts[:300, 1][::-1], 2.5)[1]
+    d2 = hough.fit_line(pts[:300, 0][::-1], pts[:300, 1][::-1], 2.5)[1]
     assert np.allclose(d1, d2) and (d1[0] < 0 or (d1[0] == 0 and d1[1] < 0))
 
 
