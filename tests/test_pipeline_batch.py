@@ -2,6 +2,7 @@
 
 import json
 import os
+import sys
 
 import laspy
 import numpy as np
@@ -154,3 +155,20 @@ def test_taichi_is_initialised_lazily_in_one_place():
     r = subprocess.run([sys.executable, "-c", "import toolbox.kernels as k; k.taichi()"], capture_output=True, text=True,
                        env=dict(os.environ, TOOLBOX_ARCH="tpu"))
     assert r.returncode != 0 and "TOOLBOX_ARCH='tpu' is not known" in r.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the allocator settings are glibc's (Linux)")
+def test_allocator_is_tuned_once_per_run_process_unless_the_user_says_otherwise():
+    """mallopt goes through on glibc; TOOLBOX_MALLOC_TUNE=0 or the user's own MALLOC_*_ tunables
+    leave the allocator alone."""
+    import subprocess
+
+    code = "import toolbox.memory as m; print('TUNED', m.tune_allocator(), m.tune_allocator())"
+    base = {k: v for k, v in os.environ.items() if not (k.startswith("MALLOC_") and k.endswith("_"))}
+    for extra, want in (({}, "TUNED True True"), ({"TOOLBOX_MALLOC_TUNE": "0"}, "TUNED False False"),
+                        ({"MALLOC_ARENA_MAX": "2"}, "TUNED True True"),
+                        ({"MALLOC_TRIM_THRESHOLD_": "1000000"}, "TUNED False False"),
+                        ({"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=65536"}, "TUNED False False")):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**base, **extra})
+        assert r.returncode == 0, r.stderr
+        assert want in r.stdout, (extra, r.stdout)

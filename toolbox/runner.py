@@ -362,6 +362,9 @@ def run_algorithm(
     ``{input name: path or list of paths}``. Everything is validated before any work starts.
     """
     t0 = time.perf_counter()
+    from .memory import tune_allocator
+
+    tune_allocator()  # arrays reuse freed memory instead of faulting fresh pages in (see memory.py)
     reg = reg or registry()
     alg = reg.get(algorithm_id)
     values = alg.validate_params(params or {})
