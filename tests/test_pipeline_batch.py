@@ -172,3 +172,39 @@ def test_allocator_is_tuned_once_per_run_process_unless_the_user_says_otherwise(
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**base, **extra})
         assert r.returncode == 0, r.stderr
         assert want in r.stdout, (extra, r.stdout)
+
+
+def test_taichi_start_up_shortcut_gives_taichi_the_same_answers():
+    """taichi's decorators read the decorating frame's source line; toolbox serves it from
+    linecache (quicker than inspect's module scan). Same line as inspect gives, inspect itself
+    restored, and a kernel defined in a class is still recognised as one."""
+    import inspect
+
+    from toolbox import kernels as tk
+
+    ti = tk.taichi()
+    assert inspect.getframeinfo.__module__ == "inspect"  # the import-time patch did not leak
+    frame = sys._getframe()
+    assert tk._frame_line(frame) == inspect.getframeinfo(frame)[3][0]
+
+    @ti.data_oriented
+    class Filler:
+        def __init__(self):
+            self.f = ti.field(ti.i32, 4)
+
+        @ti.kernel
+        def fill(self, v: ti.i32):
+            for i in self.f:
+                self.f[i] = v
+
+    @ti.kernel
+    def plain(a: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        for i in a:
+            a[i] = i
+
+    f = Filler()
+    f.fill(3)
+    assert f.f.to_numpy().tolist() == [3, 3, 3, 3]
+    arr = np.zeros(3, np.int32)
+    plain(arr)
+    assert arr.tolist() == [0, 1, 2]

@@ -56,8 +56,10 @@ def taichi():
         # taichi prints a banner on import and chatter on init: keep stdout clean for --json
         os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
         os.environ.setdefault("TI_ENABLE_PYBUF", "0")
-        with open(os.devnull, "w") as devnull, contextlib.redirect_stdout(devnull):
+        with open(os.devnull, "w") as devnull, contextlib.redirect_stdout(devnull), _source_lines_from_linecache():
             import taichi as ti
+
+            _speed_up_kernel_decoration(ti)
 
             arch = requested_arch()
             # fast_math off: kernels must agree with their numpy references vote for vote
@@ -72,6 +74,60 @@ def taichi():
         log.info("taichi initialised on %s", _arch_used)
         _ti = ti
         return ti
+
+
+def _frame_line(frame) -> str:
+    """The source line a frame is at, from linecache (what ``inspect.getframeinfo`` finds, without
+    its ``inspect.getmodule`` scan of every loaded module)."""
+    import linecache
+
+    return linecache.getline(frame.f_code.co_filename, frame.f_lineno, frame.f_globals)
+
+
+@contextlib.contextmanager
+def _source_lines_from_linecache():
+    """While taichi is imported, ``inspect.getframeinfo`` (context 1) reads the line from linecache.
+
+    taichi asks for the caller's source line once per ``@ti.func`` / ``@ti.kernel`` it decorates
+    (to tell class members apart), and the standard function scans all of ``sys.modules`` each
+    time: 131 calls cost 0.56 s of a 3.7 s power-line run in a fresh process (with pandas, scipy
+    and the rest loaded). Same answer for code in files; restored afterwards."""
+    import inspect
+
+    original = inspect.getframeinfo
+
+    def getframeinfo(frame, context=1):
+        if context != 1 or not hasattr(frame, "f_code"):
+            return original(frame, context)
+        line = _frame_line(frame)
+        return inspect.Traceback(frame.f_code.co_filename, frame.f_lineno, frame.f_code.co_name,
+                                 [line] if line else None, 0 if line else None)
+
+    inspect.getframeinfo = getframeinfo
+    try:
+        yield
+    finally:
+        inspect.getframeinfo = original
+
+
+def _speed_up_kernel_decoration(ti) -> None:
+    """The same for kernels decorated later (the plugins'): taichi's class-member test reads the
+    decorating frame's line from linecache. Left as it is if taichi's internals differ."""
+    import sys
+
+    impl = getattr(ti.lang, "kernel_impl", None)
+    patterns = getattr(impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES", None)
+    if impl is None or patterns is None or not callable(getattr(impl, "_inside_class", None)):
+        return
+
+    def _inside_class(level_of_class_stackframe):
+        try:
+            first = _frame_line(sys._getframe(level_of_class_stackframe)).strip()
+        except Exception:  # noqa: BLE001 - as taichi's own: no frame, no source -> not a class
+            return False
+        return any(p.match(first) for p in patterns)
+
+    impl._inside_class = _inside_class
 
 
 def _cuda_present() -> bool:
