@@ -109,3 +109,25 @@ def test_raster_writer_failing_midway_leaves_nothing(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         write_raster(r, tmp_path / "x.tif")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("user_setting", [None, "FULL"])
+def test_geopackage_commits_skip_fsync_unless_the_user_asks(tmp_path, user_setting):
+    """SQLite's per-commit sync is off for our (atomically renamed) GeoPackages; a user's own
+    OGR_SQLITE_SYNCHRONOUS wins. Checked in a fresh process (GDAL's options are process-wide)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import geopandas as gpd, pyogrio; from shapely.geometry import Point; "
+            "from toolbox.io.vectors import write_vectors, read_vectors; "
+            f"write_vectors({{'p': gpd.GeoDataFrame({{'a': [1]}}, geometry=[Point(0, 0)], crs='EPSG:28992')}}, "
+            f"{str(tmp_path / 'v.gpkg')!r}); "
+            f"assert len(read_vectors({str(tmp_path / 'v.gpkg')!r})['p']) == 1; "
+            "print('SYNC', pyogrio.get_gdal_config_option('OGR_SQLITE_SYNCHRONOUS'))")
+    env = {k: v for k, v in os.environ.items() if k != "OGR_SQLITE_SYNCHRONOUS"}
+    if user_setting:
+        env["OGR_SQLITE_SYNCHRONOUS"] = user_setting
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr
+    assert f"SYNC {user_setting or False}" in r.stdout  # (pyogrio reads OFF back as False)
