@@ -223,6 +223,23 @@ def test_catenary_fit_and_span_split():
     assert c == pytest.approx(1000, rel=0.02) and s0 == pytest.approx(100, abs=1) and rms < 0.04
 
 
+def test_catenary_fit_of_a_short_nearly_straight_piece_prints_no_warning():
+    """A 8.5 m piece from the corridor scene whose trial steps overflow cosh: the solver rejects
+    them, and no RuntimeWarning reaches the user's terminal."""
+    import warnings
+
+    s = np.array([170.86, 171.04, 171.55, 171.55, 173.1, 174.05, 174.09, 174.57, 174.77, 174.78, 175.36, 175.4,
+                  175.54, 176.84, 176.9, 177.19, 177.32, 177.85, 177.94, 178.03, 178.05, 178.41, 178.54, 178.76,
+                  179.34])
+    z = np.array([322.0, 322.02, 322.09, 322.14, 322.06, 322.02, 322.04, 322.03, 321.99, 321.97, 322.03, 322.02,
+                  321.96, 322.01, 321.98, 321.96, 322.03, 322.01, 321.96, 321.94, 321.9, 321.84, 321.97, 321.95,
+                  321.92])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        z0, s0, c, rms = fit_catenary(s, z)
+    assert np.isfinite([z0, s0, c]).all() and rms < 0.05
+
+
 def test_every_conductor_found_no_false_one(corridor_result):
     rep, gpkg, _, truth = corridor_result
     cond = gpd.read_file(gpkg, layer="conductors")

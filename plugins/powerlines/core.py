@@ -179,7 +179,10 @@ def fit_catenary(s, z):
     # 50 evaluations settle every well-posed span (19 on average on the corridor scene); short,
     # tight pieces whose c is barely determined crawl along a flat valley up to scipy's 300
     # without converging, for an rms that changes by a millimetre
-    sol = least_squares(res, [z00, s00, np.log(c0)], jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50)
+    # (a trial step to a tiny c makes cosh overflow: the solver rejects that step; its loss
+    # squaring the huge residuals must not print a warning to the user)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(res, [z00, s00, np.log(c0)], jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50)
     z0, s0, lc = sol.x
     r = res(sol.x)
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit
