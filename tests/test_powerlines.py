@@ -219,6 +219,16 @@ def test_catenary_fit_and_span_split():
     z = z + np.random.default_rng(0).normal(0, 0.03, len(s))
     cuts = split_spans(s, z, 8.0)
     assert len(cuts) == 1 and cuts[0] == pytest.approx(200, abs=3)
+    # the same wire measured the other way along its line (and shifted): the mirrored cut
+    for shift in (0.0, 37.3):
+        back = split_spans(shift - s[::-1], z[::-1], 8.0)
+        assert back == pytest.approx([shift - c for c in cuts[::-1]], abs=1e-6)
+    # three spans with uneven points: the candidate grid is centred, not tied to one end
+    keep = np.random.default_rng(1).random(len(s)) > 0.3
+    s3, z3 = np.r_[s[keep], 400 + s[keep][s[keep] < 150]], np.r_[z[keep], z[keep][s[keep] < 150]]
+    fwd = split_spans(s3, z3, 8.0)
+    rev = split_spans(-s3, z3, 8.0)
+    assert len(fwd) >= 1 and rev == pytest.approx([-c for c in fwd[::-1]], abs=1e-6)
     z0, s0, c, rms = fit_catenary(s[s < 195], z[s < 195])
     assert c == pytest.approx(1000, rel=0.02) and s0 == pytest.approx(100, abs=1) and rms < 0.04
 

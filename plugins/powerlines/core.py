@@ -200,7 +200,11 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
     order = np.argsort(s)
     s, z = s[order], z[order]
     step = 1.0
-    pos = np.arange(s.min() + min_span, s.max() - min_span, step)
+    # candidate positions on a grid centred on the wire: mirror-symmetric, so a line taken the
+    # other way round gives the same cuts
+    centre = 0.5 * (s.min() + s.max())
+    half = np.floor((0.5 * (s.max() - s.min()) - min_span) / step)
+    pos = centre + step * np.arange(-half, half + 1)
     lo = np.searchsorted(s, pos - window_m)
     mid = np.searchsorted(s, pos)
     hi = np.searchsorted(s, pos + window_m)
