@@ -309,8 +309,9 @@ def bench_powerlines(tmp: Path) -> list[dict]:
     for label, p, params in cases:
         n = laspy.open(p).header.point_count
         toolbox.run("powerlines", p, tmp / "pl.gpkg", overwrite=True, **params)  # warm-up
+        # best of 3: run-to-run spread on the 2-core CI machine is 20-40 %
         best, rep = min((timed(lambda: toolbox.run("powerlines", p, tmp / "pl.gpkg", overwrite=True, **params))
-                         for _ in range(2)), key=lambda r: r[0])
+                         for _ in range(3)), key=lambda r: r[0])
         exe = Path(sys.executable).with_name("toolbox")
         cmd = [str(exe), "run", "powerlines", str(p), "-o", str(tmp / "pl_cli.gpkg"), "--overwrite", "-q"]
         for k, v in params.items():
