@@ -19,11 +19,12 @@ Why it is written this way (each measured on the 2-core CI machine, 20 000 point
   (no remainder loop), the band-subtraction flags are always computed (no second variant: the
   compare costs nothing measurable beside the scattered increments) and small steps are merged;
 - handing a loop to taichi's CPU thread pool costs about 0.1 ms (0.15 ms with the launch), about
-  what subtracting a band of 300 points costs, so a peak takes one launch: the vote kernel keeps
-  each θ row's maximum current itself (the task that owns a row rescans it when its peak cell lost
-  votes, about 15 % of the rows per band on AHN4) and the peak is an argmax over the row maxima.
-  Before, a separate rescan kernel ran 1-3 times per peak: 0.9 ms per peak on AHN4. Tiny loops
-  (copying a band's few hundred points) run in the launching thread.
+  what subtracting a band of 300 points costs. So the band's subtraction only flags the rows whose
+  peak cell lost votes, and the peak search is one *serial* kernel: it rescans dirty rows only
+  while their old maximum (an upper bound) could still win, the highest bound first. Before, a
+  parallel rescan kernel ran 1-3 times per peak (0.9 ms per peak on AHN4; now 0.3-0.5 ms). Rescanning
+  hit rows eagerly inside the vote kernel was tried: more rows scanned, 2x slower per band. Tiny
+  loops (copying a band's few hundred points) run in the launching thread.
 Result: 2–3 G votes/s against 0.22 G for the previous one-θ-per-thread ndarray kernel.
 """
 
