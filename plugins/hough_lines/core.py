@@ -94,7 +94,8 @@ def isolated_points(pts: np.ndarray, max_gap: float) -> np.ndarray:
 
 
 def fit_line(px, py, max_gap: float):
-    """SVD line fit on centred points, leaving out isolated ones (no neighbour within max_gap)."""
+    """The method's SVD line fit (its first singular vector, in closed form) on centred points,
+    leaving out isolated ones (no neighbour within max_gap). Returns (centre, direction, rms)."""
     pts = np.column_stack([px, py])
     if len(pts) >= 3:
         keep = ~isolated_points(pts, max_gap)
