@@ -309,9 +309,12 @@ def test_dtm_kernels_match_their_numpy_references():
     z = 300 + 0.3 * x - 0.1 * y + rng.normal(0, 0.2, len(x))
     grid = core.Grid.around(x, y, 1.5)
     ref = core.cell_moments(grid, x, y, z)
-    got = acc.moments(grid, x, y, z)
-    for name in core.MOMENTS:  # same sums, another order of addition
-        np.testing.assert_allclose(got[name], ref[name], rtol=1e-9, atol=1e-6)
+    for threads in (acc._threads, 1, 3):  # the points split into 2, 1 and 3 per-thread slices
+        acc._threads = threads
+        got = acc.moments(grid, x, y, z)
+        for name in core.MOMENTS:  # same sums, another order of addition
+            assert got[name].flags.c_contiguous
+            np.testing.assert_allclose(got[name], ref[name], rtol=1e-9, atol=1e-6)
     zmin_ref, flat_ref = core.minimum_surface(grid, x, y, z)
     zmin, flat = acc.minimum_surface(grid, x, y, z)
     np.testing.assert_array_equal(flat, flat_ref)

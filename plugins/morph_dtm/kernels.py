@@ -1,15 +1,50 @@
 """Taichi kernels of the DTM's per-point passes: per-cell moments (scatter) and bilinear sampling
 of a grid at the points (gather), in parallel. ``core.cell_moments`` and ``core.Sampler`` are
-their numpy references (the tests compare them)."""
+their numpy references (the tests compare them).
+
+Moments on the CPU: each thread sums its own slice of the points into its own copy of the grid
+(the ten sums of a cell side by side), and the copies are added up after. taichi makes ``+=`` on
+shared memory atomic, and a float64 atomic add is a compare-and-swap loop on x86: ten per point
+made the shared-grid kernel 3.5x slower (10 M points: 212 ms against 61 ms with two slices).
+On CUDA, where atomics are cheap and threads many, the shared-grid kernel is used.
+"""
 
 import numpy as np
 
 from .core import MOMENTS
 
 _k = None
+SLICE_GRID_BYTES = 1 << 29  # the per-thread grid copies take at most this much memory
+TASK_STRIDE = 512  # taichi's CPU backend hands out a range-for in chunks of up to 512 iterations
 
 
 def _build(ti):
+    V10 = ti.types.vector(len(MOMENTS), ti.f64)
+
+    @ti.kernel
+    def moments_sliced(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                       z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
+                       rows: ti.i32, cols: ti.i32, out: ti.types.ndarray(dtype=V10, ndim=2)):
+        # slice p of the points into grid copy p; one slice per thread: the loop runs over
+        # slices x TASK_STRIDE iterations so that each slice lands in another thread's chunk
+        slices = out.shape[0]
+        n = x.shape[0]
+        for t in range(slices * TASK_STRIDE):
+            if t % TASK_STRIDE == 0:
+                p = t // TASK_STRIDE
+                lo = ti.cast(ti.cast(n, ti.i64) * p // slices, ti.i32)
+                hi = ti.cast(ti.cast(n, ti.i64) * (p + 1) // slices, ti.i32)
+                for i in range(lo, hi):
+                    c = ti.min(ti.max(ti.cast((x[i] - west) / cell, ti.i32), 0), cols - 1)
+                    r = ti.min(ti.max(ti.cast((north - y[i]) / cell, ti.i32), 0), rows - 1)
+                    f = r * cols + c
+                    dx = x[i] - (west + (ti.cast(c, ti.f64) + 0.5) * cell)
+                    dy = y[i] - (north - (ti.cast(r, ti.f64) + 0.5) * cell)
+                    zi = z[i]
+                    # a plain load and store (not +=, which would be atomic): the slice is ours
+                    out[p, f] = out[p, f] + ti.Vector([1.0, dx, dy, zi, dx * dx, dy * dy, dx * dy, dx * zi,
+                                                       dy * zi, zi * zi])
+
     @ti.kernel
     def moments(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
                 z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
@@ -64,7 +99,7 @@ def _build(ti):
             flat[i] = f
             ti.atomic_min(zmin[f], z[i])
 
-    return moments, bilinear, cell_min
+    return moments, moments_sliced, bilinear, cell_min
 
 
 class TaichiAccel:
@@ -74,13 +109,26 @@ class TaichiAccel:
         global _k
         if _k is None:
             _k = _build(ti)
-        self._moments, self._bilinear, self._cell_min = _k
+        self._moments, self._moments_sliced, self._bilinear, self._cell_min = _k
+        cfg = ti.lang.impl.current_cfg()
+        self._threads = int(cfg.cpu_max_num_threads) if cfg.arch in (ti.x64, ti.arm64) else 0  # 0: not a CPU
 
     def moments(self, grid, x, y, z) -> dict:
-        out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
-        if len(x):
-            self._moments(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64),
-                          np.ascontiguousarray(z, np.float64), grid.west, grid.north, grid.cell, out)
+        x, y, z = (np.ascontiguousarray(a, np.float64) for a in (x, y, z))
+        cells = grid.rows * grid.cols
+        # one slice per thread while the copies stay small and each slice has points to sum
+        slices = max(min(self._threads, SLICE_GRID_BYTES // (cells * len(MOMENTS) * 8), len(x) // 10_000), 1)
+        if self._threads:
+            part = np.zeros((slices, cells, len(MOMENTS)), np.float64)
+            if len(x):
+                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, part)
+            total = part[0] if slices == 1 else part.sum(axis=0)
+            # one grid per moment, contiguous (the fit reads each many times)
+            out = np.ascontiguousarray(total.T).reshape(len(MOMENTS), grid.rows, grid.cols)
+        else:  # a GPU: one shared grid, atomic adds
+            out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
+            if len(x):
+                self._moments(x, y, z, grid.west, grid.north, grid.cell, out)
         return {name: out[k] for k, name in enumerate(MOMENTS)}
 
     def minimum_surface(self, grid, x, y, z):
