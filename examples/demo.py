@@ -16,8 +16,7 @@ import laspy
 import numpy as np
 
 import toolbox
-from toolbox.io.rasters import read_raster
-from toolbox.runner import write_png
+from toolbox.io.rasters import Raster, read_raster, write_image
 
 # class colours of the overview picture (ASPRS)
 COLOURS = {1: (150, 150, 150), 2: None, 3: (170, 220, 120), 4: (90, 180, 80), 5: (30, 120, 50),
@@ -50,7 +49,9 @@ def draw(hs_path: Path, classified: Path, out_png: Path, wires: Path | None = No
         sel = order[c[order] == cls]
         if len(sel):
             rgb[row[sel], col[sel]] = 0.25 * rgb[row[sel], col[sel]] + 0.75 * np.array(colour, np.float32)
-    write_png(np.clip(rgb, 0, 255).astype(np.uint8), out_png, overwrite=True)
+    # georeferenced (world file + CRS): it opens in place over the map in QGIS
+    write_image(Raster(np.moveaxis(np.clip(rgb, 0, 255).astype(np.uint8), -1, 0), t, crs=hs.crs), out_png,
+                overwrite=True)
 
 
 def main(argv=None) -> int:
@@ -150,7 +151,7 @@ def main(argv=None) -> int:
         if p.is_file():
             print(f"  {p.name:<28} {p.stat().st_size / 1e6:8.2f} MB")
     print("open the .tif and .gpkg files in QGIS: they come styled (sidecar .qml, embedded layer styles); "
-          "overview.png shows the classes over the hillshade")
+          "overview.png shows the classes over the hillshade (georeferenced, it opens in place)")
     return 0
 
 

@@ -255,13 +255,36 @@ def test_feet_input_gives_dtm_in_feet(tmp_path):
     assert ground_errors(g, pred)["type1_pct"] < 2.0  # vendor ground is kept
 
 
-def test_preview_is_an_rgb_png(terrain_scene, tmp_path):
+def test_preview_is_a_georeferenced_rgb_png(terrain_scene, tmp_path):
+    import warnings
+
     toolbox.run("dtm", terrain_scene, tmp_path / "d.tif", outputs={"preview": str(tmp_path / "p.png")})
-    with rasterio.open(tmp_path / "p.png") as ds:
-        img = ds.read()
-    assert img.shape[0] == 3 and img.shape[1:] == read_raster(tmp_path / "d.tif").shape
+    dtm = read_raster(tmp_path / "d.tif")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no NotGeoreferencedWarning: it lies on the DTM's grid
+        with rasterio.open(tmp_path / "p.png") as ds:
+            img = ds.read()
+            assert ds.transform == dtm.transform and ds.crs.to_epsg() == 25832
+    assert img.shape[0] == 3 and img.shape[1:] == dtm.shape
     red = (img[0] > 150) & (img[1] < 100)
     assert 0.01 < red.mean() < 0.4  # buildings and trees drawn in red
+    # the world file QGIS reads: cell size, rotations, -cell size, centre of the top-left cell
+    wld = np.loadtxt(tmp_path / "p.wld")
+    t = dtm.transform
+    np.testing.assert_allclose(wld, [t.a, 0, 0, t.e, t.c + t.a / 2, t.f + t.e / 2])
+    assert not [p.name for p in tmp_path.iterdir() if "partial" in p.name]
+
+
+def test_image_written_without_georeference_drops_stale_sidecars(tmp_path):
+    from affine import Affine
+
+    from toolbox.io.rasters import Raster, write_image
+
+    rgb = np.zeros((3, 4, 5), np.uint8)
+    write_image(Raster(rgb, Affine(1, 0, 100, 0, -1, 200), crs=None), tmp_path / "a.png")
+    assert (tmp_path / "a.wld").exists()
+    write_image(np.zeros((4, 5, 3), np.uint8), tmp_path / "a.png", overwrite=True)  # a plain picture now
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
 
 
 def test_grids_too_big_for_memory_are_refused_before_work(tmp_path, cli):

@@ -236,32 +236,12 @@ def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) 
             tmp.write_text(json.dumps(data, indent=2, default=_json_default), encoding="utf-8")
         return {"keys": sorted(data)[:20] if isinstance(data, dict) else None}
     if kind == "image":
-        img = np.asarray(data)
-        write_png(img, path, overwrite)
-        return {"height": int(img.shape[0]), "width": int(img.shape[1])}
+        from .io.rasters import Raster, write_image
+
+        write_image(data, path, overwrite)
+        rows, cols = data.shape if isinstance(data, Raster) else np.asarray(data).shape[:2]
+        return {"height": int(rows), "width": int(cols), "georeferenced": isinstance(data, Raster)}
     raise UsageError(f"unknown output kind {kind!r}")
-
-
-def write_png(rgb: np.ndarray, path: Path, overwrite: bool) -> None:
-    """Write an (rows, cols[, 3|4]) uint8 image as PNG (through rasterio's PNG driver)."""
-    import warnings
-
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
-
-    from .io.atomic import atomic_path
-
-    img = np.asarray(rgb)
-    if img.dtype != np.uint8:
-        raise TypeError("image outputs must be uint8")
-    bands = img[np.newaxis] if img.ndim == 2 else np.moveaxis(img, -1, 0)
-    with atomic_path(path, overwrite) as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        with rasterio.open(tmp, "w", driver="PNG", width=bands.shape[2], height=bands.shape[1],
-                           count=bands.shape[0], dtype="uint8") as ds:
-            ds.write(bands)
-    for aux in path.parent.glob(path.name + ".aux.xml"):
-        aux.unlink()
 
 
 def _json_default(o):

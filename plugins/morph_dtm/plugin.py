@@ -134,8 +134,11 @@ def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
 
 
 def _preview(dtm_raster, pc, ground, noise):
-    """Hillshade of the DTM with the points to be removed drawn over it (objects red, noise blue)."""
+    """Hillshade of the DTM with the points to be removed drawn over it (objects red, noise blue),
+    on the DTM's grid (the PNG is georeferenced)."""
     import numpy as np
+
+    from toolbox.io.rasters import Raster
 
     from .core import Grid, hillshade
 
@@ -148,7 +151,8 @@ def _preview(dtm_raster, pc, ground, noise):
         cover = np.zeros(hs.shape, bool)
         cover[r[mask], c[mask]] = True
         rgb[cover] = 0.35 * rgb[cover] + 0.65 * np.array(colour, np.float32)
-    return np.clip(rgb, 0, 255).astype(np.uint8)
+    return Raster(np.moveaxis(np.clip(rgb, 0, 255).astype(np.uint8), -1, 0), t, crs=dtm_raster.crs,
+                  description="DTM preview: removed points red, noise blue")
 
 
 def _run_dtm(inputs, params, ctx):

@@ -127,6 +127,53 @@ def write_raster(r: Raster, path: str | os.PathLike, style_dirs=(), overwrite: b
     return path
 
 
+def write_image(image, path: str | os.PathLike, overwrite: bool = False) -> Path:
+    """Write an 8-bit picture as PNG, atomically: a (rows, cols[, 3|4]) uint8 array, or a
+    :class:`Raster` of uint8 bands, which is georeferenced: a world file (``.wld``) and GDAL's
+    ``.png.aux.xml`` with the CRS go beside it, so that QGIS opens it in place over the map."""
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    path = Path(path)
+    geo = image if isinstance(image, Raster) else None
+    img = np.asarray(geo.data if geo is not None else image)
+    if img.dtype != np.uint8:
+        raise TypeError("image outputs must be uint8")
+    if geo is not None:
+        bands = img[np.newaxis] if img.ndim == 2 else img  # a Raster holds (bands, rows, cols)
+    else:
+        bands = img[np.newaxis] if img.ndim == 2 else np.moveaxis(img, -1, 0)
+    sidecars = {".wld": path.with_suffix(".wld"), ".png.aux.xml": path.with_name(path.name + ".aux.xml")}
+    with atomic_path(path, overwrite) as tmp:
+        options = {}
+        if geo is not None:
+            options = {"transform": geo.transform, "crs": _rio_crs(geo.crs), "WORLDFILE": "YES"}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(tmp, "w", driver="PNG", width=bands.shape[2], height=bands.shape[1],
+                               count=bands.shape[0], dtype="uint8", **options) as ds:
+                ds.write(bands)
+        # GDAL names the sidecars after the temporary file: they move in with the picture (and a
+        # picture written without them must not pick up stale ones of an earlier run)
+        moved = []
+        try:
+            for ext, final in sidecars.items():
+                made = tmp.with_suffix(ext) if ext == ".wld" else tmp.with_name(tmp.name + ".aux.xml")
+                if geo is not None and made.exists():
+                    os.replace(made, final)
+                    moved.append(final)
+                else:
+                    made.unlink(missing_ok=True)
+                    final.unlink(missing_ok=True)
+        except BaseException:
+            for f in moved:
+                f.unlink(missing_ok=True)
+            raise
+    return path
+
+
 def _rio_crs(crs):
     if crs is None:
         return None
