@@ -93,6 +93,18 @@ def test_crs_override_is_written(tmp_path):
     assert back.crs.to_epsg() == 28992
 
 
+def test_header_crs_remembered_per_projection_records(tmp_path):
+    # the parsed CRS of a file is reused for files with the same projection records, never for others
+    rng = np.random.default_rng(0)
+    a = write_points(PointCloud(rng.uniform(0, 9, 20), rng.uniform(0, 9, 20), rng.uniform(0, 9, 20),
+                                crs=parse_crs("EPSG:25832")), tmp_path / "a.laz")
+    b = write_points(PointCloud(rng.uniform(0, 9, 20), rng.uniform(0, 9, 20), rng.uniform(0, 9, 20),
+                                crs=parse_crs("EPSG:28992")), tmp_path / "b.laz")
+    first = read_points(a).crs
+    assert read_points(b).crs.to_epsg() == 28992
+    assert read_points(a).crs is first and first.to_epsg() == 25832
+
+
 def test_international_feet_are_honoured():
     path = shared_file("pdal_autzen/autzen_trim.las")
     pc = read_points(path)

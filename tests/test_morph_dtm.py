@@ -238,7 +238,9 @@ def test_feet_input_gives_dtm_in_feet(tmp_path):
     toolbox.run("dtm", path, tmp_path / "a.tif", resolution_m=1.0)
     dtm = read_raster(tmp_path / "a.tif")
     assert dtm.cell_size == pytest.approx(1 / 0.3048)  # 1 m expressed in the file's feet
-    assert dtm.crs is not None
+    from pyproj import CRS
+
+    assert CRS.from_user_input(dtm.crs) == read_points(path).crs  # its ESRI-style Lambert, kept in the GeoTIFF
     zs = read_points(path).z
     assert np.nanmin(dtm.data) >= zs.min() - 1 and np.nanmax(dtm.data) <= zs.max()
     assert read_points(tmp_path / "a_classified.laz").crs == read_points(path).crs  # a non-EPSG CRS kept

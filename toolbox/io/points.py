@@ -340,7 +340,7 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
     file_crs = None
     if user_crs is None:
         try:
-            file_crs = hdr.parse_crs()
+            file_crs = _header_crs(hdr)
         except Exception as exc:  # malformed CRS VLRs: keep the points, say so
             log.warning("%s: could not parse the CRS VLRs (%s); pass --crs", path, exc)
     pc = PointCloud(
@@ -411,9 +411,28 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
 
 def _safe_parse_crs(hdr):
     try:
-        return hdr.parse_crs()
+        return _header_crs(hdr)
     except Exception:
         return None
+
+
+_CRS_CACHE: dict = {}
+
+
+def _header_crs(hdr):
+    """``hdr.parse_crs()``, remembered by the bytes of the file's projection records: PROJ takes
+    28 ms to parse Autzen's ESRI-style WKT, once on reading and again on writing the classified
+    copy, and the tiles of a batch share one CRS."""
+    records = list(hdr.vlrs) + list(hdr.evlrs or [])
+    try:
+        key = tuple((type(v).__name__, v.record_data_bytes()) for v in records if v.user_id == "LASF_Projection")
+    except Exception:  # a record laspy cannot serialise: parse without remembering
+        return hdr.parse_crs()
+    if key not in _CRS_CACHE:
+        if len(_CRS_CACHE) >= 64:
+            _CRS_CACHE.clear()
+        _CRS_CACHE[key] = hdr.parse_crs()
+    return _CRS_CACHE[key]
 
 
 def _read_ascii(path: Path) -> PointCloud:
