@@ -15,7 +15,8 @@ from toolbox import kernels
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import _two_means_1d, catenary, fit_catenary, split_spans
+from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, parabola_fit,
+                                             split_spans)
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -486,3 +487,14 @@ def test_accumulator_refuses_a_rho_range_without_zero():
     t = np.radians(np.arange(-90, 90, 1.0))
     with pytest.raises(ValueError, match="must include ρ = 0"):
         hough_kernels.TaichiAccumulator(kernels.taichi(), np.cos(t), np.sin(t), 5, 10.0, 100)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_closed_form_line_and_parabola_equal_polyfit(seed):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-150, 150, 300)  # metres along a wire, centred
+    y = 310 + 0.02 * x + 4e-4 * x * x + rng.normal(0, 0.05, len(x))
+    np.testing.assert_allclose(line_fit(x + 1e5, y), np.polyfit(x + 1e5, y, 1), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(parabola_fit(x, y), np.polyfit(x, y, 2), rtol=1e-9, atol=1e-12)
+    assert line_fit(np.full(5, 3.0), np.arange(5.0)) == (0.0, 2.0)  # all x equal: flat, through the mean
+    assert parabola_fit(np.array([1.0, 1.0, 2.0]), np.array([1.0, 3.0, 4.0])) == pytest.approx((0.0, 2.0, 0.0))
