@@ -112,6 +112,10 @@ def warm_up(tmp: Path) -> None:
     path = tmp / "warm_up.laz"
     toolbox.run("synthetic-scene", output=path, overwrite=True, kind="terrain", seed=5, width_m=220.0, height_m=150.0)
     toolbox.run("dtm", path, tmp / "warm_up.tif", overwrite=True)
+    # and a small one: clouds below the kernels' threshold take the numpy path, cold until used
+    small = tmp / "warm_up_small.laz"
+    toolbox.run("synthetic-scene", output=small, overwrite=True, kind="terrain", seed=6, width_m=60.0, height_m=50.0)
+    toolbox.run("dtm", small, tmp / "warm_up_small.tif", overwrite=True)
     pc = read_points(path)
     from toolbox.io.points import write_points
 
@@ -149,15 +153,22 @@ def bench_ground(tmp: Path, with_10m: bool, quick: bool) -> list[dict]:
         else:
             truth = None  # producer classes are not a reference for every file (see notes)
         out = tmp / "ours.tif"
-        t_ours, rep = timed(lambda: toolbox.run("dtm", path, out, overwrite=True, crs=crs))
+        # files under a million points: every contender's best of 3 (single runs of 0.1 s swing by
+        # 20-40 % here); the large ones once
+        reps = 3 if len(pc) < 1_000_000 else 1
+
+        def best(fn):
+            return min((fn() for _ in range(reps)), key=lambda r: r[0] if r[0] is not None else 0.0)
+
+        t_ours, rep = best(lambda: timed(lambda: toolbox.run("dtm", path, out, overwrite=True, crs=crs)))
         ours = np.asarray(laspy.read(tmp / "ours_classified.laz").classification) == 2
         # whitebox reads LAS/LAZ only (and not compressed point format 6+): give it plain LAS
         las_in = tmp / "peer_input.las"
         from toolbox.io.points import write_points
 
         write_points(pc, las_in, overwrite=True)
-        t_wb, wb = whitebox_ground(las_in, tmp / "wb.las")
-        t_csf, csf = csf_ground(pc)
+        t_wb, wb = best(lambda: whitebox_ground(las_in, tmp / "wb.las"))
+        t_csf, csf = best(lambda: csf_ground(pc))
         # CSF end to end, the same work as ours: read the file, filter, write the classified LAZ
         t_csf_e2e = None
         if t_csf is not None:
@@ -166,7 +177,7 @@ def bench_ground(tmp: Path, with_10m: bool, quick: bool) -> list[dict]:
                 _, m = csf_ground(p2)
                 cls = np.where(m, 2, 1).astype(np.uint8)
                 write_points(p2.with_fields(classification=cls), tmp / "csf.laz", overwrite=True)
-            t_csf_e2e, _ = timed(csf_e2e)
+            t_csf_e2e, _ = best(lambda: timed(csf_e2e))
         row = {"case": f"ground/DTM: {label}", "points": len(pc), "ours_s": t_ours,
                "ours_filter_s": rep["stats"]["filter_s"], "whitebox_s": t_wb, "csf_s": t_csf, "csf_e2e_s": t_csf_e2e}
         if truth is not None:

@@ -28,6 +28,18 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
     assert ja == jb
 
 
+@pytest.mark.parametrize("kind", ["terrain", "corridor", "roofs"])
+@pytest.mark.parametrize("size", [(50.0, 50.0), (60.0, 50.0)])
+def test_the_smallest_scenes_are_made(kind, size):
+    # the parameters allow 50 m; buildings too large for the scene are left out, not a crash
+    W, H = size
+    scene = make_scene(kind, seed=1, density_ppm2=2.0, width_m=W, height_m=H)
+    assert len(scene.x) > 0.5 * 2.0 * W * H
+    for b in scene.truth["buildings"]:
+        fp = np.asarray(b["footprint"]) - np.asarray(scene.origin)
+        assert fp.min() >= 0 and (fp[:, 0] <= W).all() and (fp[:, 1] <= H).all()
+
+
 def test_density_class_shares_and_returns_are_plausible(corridor):
     s = corridor
     W, H = s.extent

@@ -336,6 +336,8 @@ def _place_buildings(kind, W, H, rng, terrain, lines):
     placed: list[Building] = []
     want_near = bool(lines)  # one house stands next to line A
     for roof, L, Wd in specs:
+        if L + 16 > min(W, H):  # does not fit, with its 8 m margins, in a small scene
+            continue
         near = want_near and roof in ("gable", "hip") and L <= 14
         for _try in range(400):
             heading = np.pi / 2 if roof == "hip_dormer" else rng.uniform(0, np.pi)  # test building: faces E/W
