@@ -1,6 +1,7 @@
-"""Taichi kernels of the DTM's per-point passes: per-cell moments (scatter) and bilinear sampling
-of a grid at the points (gather), in parallel. ``core.cell_moments`` and ``core.Sampler`` are
-their numpy references (the tests compare them).
+"""Taichi kernels of the DTM's per-point passes: lowest point per cell, per-cell moments
+(scatter), and the near-surface test (two bilinear samples of grids at the points and the
+tolerance test, in one pass), in parallel. ``core.minimum_surface``, ``core.cell_moments`` and
+``core._near_surface`` with ``core.Sampler`` are their numpy references (the tests compare them).
 
 Moments on the CPU: each thread sums its own slice of the points into its own copy of the grid
 (the ten sums of a cell side by side), and the copies are added up after. taichi makes ``+=`` on
@@ -24,10 +25,11 @@ def _build(ti):
     @ti.kernel
     def moments_sliced(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
                        z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
-                       rows: ti.i32, cols: ti.i32, out: ti.types.ndarray(dtype=V10, ndim=2)):
+                       rows: ti.i32, cols: ti.i32, part: ti.types.ndarray(dtype=V10, ndim=2),
+                       out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
         # slice p of the points into grid copy p; one slice per thread: the loop runs over
         # slices x TASK_STRIDE iterations so that each slice lands in another thread's chunk
-        slices = out.shape[0]
+        slices = part.shape[0]
         n = x.shape[0]
         for t in range(slices * TASK_STRIDE):
             if t % TASK_STRIDE == 0:
@@ -42,8 +44,16 @@ def _build(ti):
                     dy = y[i] - (north - (ti.cast(r, ti.f64) + 0.5) * cell)
                     zi = z[i]
                     # a plain load and store (not +=, which would be atomic): the slice is ours
-                    out[p, f] = out[p, f] + ti.Vector([1.0, dx, dy, zi, dx * dx, dy * dy, dx * dy, dx * zi,
-                                                       dy * zi, zi * zi])
+                    part[p, f] = part[p, f] + ti.Vector([1.0, dx, dy, zi, dx * dx, dy * dy, dx * dy, dx * zi,
+                                                         dy * zi, zi * zi])
+        # the copies added up, one grid per moment (in numpy, the sum and the transposition took
+        # twice as long as the scatter)
+        for f in range(part.shape[1]):
+            total = part[0, f]
+            for p in range(1, slices):
+                total += part[p, f]
+            for k in ti.static(range(len(MOMENTS))):
+                out[k, f] = total[k]
 
     @ti.kernel
     def moments(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
@@ -99,7 +109,35 @@ def _build(ti):
             flat[i] = f
             ti.atomic_min(zmin[f], z[i])
 
-    return moments, moments_sliced, bilinear, cell_min
+    @ti.kernel
+    def near_surface(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                     z: ti.types.ndarray(dtype=ti.f64, ndim=1), surface: ti.types.ndarray(dtype=ti.f64, ndim=2),
+                     slope: ti.types.ndarray(dtype=ti.f64, ndim=2), west: ti.f64, north: ti.f64, cell: ti.f64,
+                     threshold: ti.f64, slope_factor: ti.f64, below: ti.f64,
+                     near: ti.types.ndarray(dtype=ti.u8, ndim=1), dz: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        # both bilinear samples and the test in one pass over the points (three passes of numpy
+        # over ten million points cost more than the two samples)
+        rows = surface.shape[0]
+        cols = surface.shape[1]
+        for i in range(x.shape[0]):
+            r = ti.min(ti.max((north - y[i]) / cell - 0.5, 0.0), ti.cast(rows - 1, ti.f64))
+            c = ti.min(ti.max((x[i] - west) / cell - 0.5, 0.0), ti.cast(cols - 1, ti.f64))
+            r0 = ti.min(ti.cast(r, ti.i32), ti.max(rows - 2, 0))
+            c0 = ti.min(ti.cast(c, ti.i32), ti.max(cols - 2, 0))
+            fr = r - ti.cast(r0, ti.f64)
+            fc = c - ti.cast(c0, ti.f64)
+            r1 = ti.min(r0 + 1, rows - 1)
+            c1 = ti.min(c0 + 1, cols - 1)
+            top = surface[r0, c0] * (1.0 - fc) + surface[r0, c1] * fc
+            bot = surface[r1, c0] * (1.0 - fc) + surface[r1, c1] * fc
+            s_top = slope[r0, c0] * (1.0 - fc) + slope[r0, c1] * fc
+            s_bot = slope[r1, c0] * (1.0 - fc) + slope[r1, c1] * fc
+            tol = threshold + slope_factor * (s_top * (1.0 - fr) + s_bot * fr) * cell
+            d = z[i] - (top * (1.0 - fr) + bot * fr)
+            dz[i] = d
+            near[i] = ti.cast((d <= tol) and (d >= -below), ti.u8)
+
+    return moments, moments_sliced, bilinear, cell_min, near_surface
 
 
 class TaichiAccel:
@@ -109,7 +147,7 @@ class TaichiAccel:
         global _k
         if _k is None:
             _k = _build(ti)
-        self._moments, self._moments_sliced, self._bilinear, self._cell_min = _k
+        self._moments, self._moments_sliced, self._bilinear, self._cell_min, self._near_surface = _k
         cfg = ti.lang.impl.current_cfg()
         self._threads = int(cfg.cpu_max_num_threads) if cfg.arch in (ti.x64, ti.arm64) else 0  # 0: not a CPU
 
@@ -120,11 +158,10 @@ class TaichiAccel:
         slices = max(min(self._threads, SLICE_GRID_BYTES // (cells * len(MOMENTS) * 8), len(x) // 10_000), 1)
         if self._threads:
             part = np.zeros((slices, cells, len(MOMENTS)), np.float64)
+            out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
             if len(x):
-                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, part)
-            total = part[0] if slices == 1 else part.sum(axis=0)
-            # one grid per moment, contiguous (the fit reads each many times)
-            out = np.ascontiguousarray(total.T).reshape(len(MOMENTS), grid.rows, grid.cols)
+                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, part,
+                                     out.reshape(len(MOMENTS), cells))
         else:  # a GPU: one shared grid, atomic adds
             out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
             if len(x):
@@ -141,6 +178,17 @@ class TaichiAccel:
                            grid.rows, grid.cols, flat, zmin)
         zmin[np.isinf(zmin)] = np.nan
         return zmin.reshape(grid.rows, grid.cols), flat
+
+    def near_surface(self, grid, x, y, z, surface, slope, threshold, slope_factor, below):
+        """Kernel twin of ``core._near_surface`` (with the slope grid given): (mask, dz)."""
+        near = np.empty(len(x), np.uint8)
+        dz = np.empty(len(x), np.float64)
+        if len(x):
+            self._near_surface(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64),
+                               np.ascontiguousarray(z, np.float64), np.ascontiguousarray(surface, np.float64),
+                               np.ascontiguousarray(slope, np.float64), grid.west, grid.north, grid.cell,
+                               float(threshold), float(slope_factor), float(below), near, dz)
+        return near.view(bool), dz
 
     def sampler(self, grid, x, y):
         x = np.ascontiguousarray(x, np.float64)

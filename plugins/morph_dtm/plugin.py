@@ -93,10 +93,9 @@ def _footprint(grid, x, y, radius_cells):
 
     from .core import footprint
 
-    occ = np.zeros((grid.rows, grid.cols), bool)
-    r, c = grid.index(x, y)
-    occ[r, c] = True
-    return footprint(occ, radius_cells)
+    occ = np.zeros(grid.rows * grid.cols, bool)
+    occ[grid.flat_index(x, y)] = True
+    return footprint(occ.reshape(grid.rows, grid.cols), radius_cells)
 
 
 KERNEL_MIN_POINTS = 300_000  # below this, compiling the kernels costs more than they save
