@@ -15,8 +15,8 @@ from toolbox import kernels
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, parabola_fit,
-                                             split_spans)
+from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, occupied_cells,
+                                             parabola_fit, split_spans)
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -498,3 +498,13 @@ def test_closed_form_line_and_parabola_equal_polyfit(seed):
     np.testing.assert_allclose(parabola_fit(x, y), np.polyfit(x, y, 2), rtol=1e-9, atol=1e-12)
     assert line_fit(np.full(5, 3.0), np.arange(5.0)) == (0.0, 2.0)  # all x equal: flat, through the mean
     assert parabola_fit(np.array([1.0, 1.0, 2.0]), np.array([1.0, 3.0, 4.0])) == pytest.approx((0.0, 2.0, 0.0))
+
+
+@pytest.mark.parametrize("spread", [300.0, 2e6])  # a dense grid, and a huge sparse extent (distinct cells counted)
+def test_occupied_cells_counts_distinct_cells(spread):
+    rng = np.random.default_rng(4)
+    x = 512000 + rng.uniform(0, spread, 20000)
+    y = 5403000 + rng.uniform(0, 300.0, 20000)
+    for cell in (1.0, 0.5, 1 / 0.3048):
+        want = len({(int(a), int(b)) for a, b in zip(np.floor(x / cell), np.floor(y / cell))})
+        assert occupied_cells(x, y, cell) == want

@@ -22,13 +22,19 @@ from scipy.spatial import cKDTree
 def occupied_cells(x, y, cell: float) -> int:
     """How many ``cell``-sized squares hold a point (an occupancy grid: no sort of all points)."""
     x0, y0 = np.floor(x.min() / cell), np.floor(y.min() / cell)
-    c = (x / cell - x0).astype(np.int64)
-    r = (y / cell - y0).astype(np.int64)
+    t = np.divide(x, cell)  # one scratch array, reused (this runs on every point of the survey)
+    t -= x0
+    c = t.astype(np.int64)
+    np.divide(y, cell, out=t)
+    t -= y0
+    r = t.astype(np.int64)
     cols, rows = int(c.max()) + 1, int(r.max()) + 1
+    r *= cols
+    r += c
     if rows * cols > 400_000_000:  # a sparse survey over a huge extent: count distinct cells instead
-        return len(np.unique(r * cols + c))
+        return len(np.unique(r))
     occ = np.zeros(rows * cols, bool)
-    occ[r * cols + c] = True
+    occ[r] = True
     return int(np.count_nonzero(occ))
 
 

@@ -52,7 +52,7 @@ def _run(inputs, params, ctx):
                         "above ground; check height_min_m / height_max_m")
     xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
     # the survey's surface density: points per occupied square metre (corridor strips included)
-    surface_density = len(pc) / max(occupied_cells(pc.x * hu, pc.y * hu, 1.0), 1)
+    surface_density = len(pc) / max(occupied_cells(pc.x, pc.y, 1.0 / hu), 1)  # 1 m cells
     if rn is not None and np.any(rn > 0) and params["first_returns_only"]:
         surface_density *= float(np.mean(rn == 1))
     linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
