@@ -508,3 +508,24 @@ def test_occupied_cells_counts_distinct_cells(spread):
     for cell in (1.0, 0.5, 1 / 0.3048):
         want = len({(int(a), int(b)) for a, b in zip(np.floor(x / cell), np.floor(y / cell))})
         assert occupied_cells(x, y, cell) == want
+
+
+def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():
+    # the kernels clear a block of θ rows when they first touch it, not in a pass of their own:
+    # the counts a previous tile left behind must never show
+    rng = np.random.default_rng(7)
+    x, y = rng.uniform(0, 110, 4000), rng.uniform(0, 110, 4000)
+    thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
+    c, s = np.cos(thetas), np.sin(thetas)
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as old:
+        old.vote(x, y, 1)
+    a = reference.NumpyAccumulator(c, s, k_min, 10.0, rows)
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as b:
+        assert not b.to_numpy().any() and b.peak()[2] == 0
+        a.clear_cell(40, 700)
+        b.clear_cell(40, 700)  # a cell of a block no vote has touched yet
+        assert not b.to_numpy().any()
+        x2, y2 = x[:500], y[:500]
+        a.vote(x2, y2, 1)
+        b.vote(x2, y2, 1)
+        assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()

@@ -57,6 +57,17 @@ def _build(ti, cells: int):
     row_max = ti.field(ti.i32, MAX_THETAS)
     row_arg = ti.field(ti.i32, MAX_THETAS)
     dirty = ti.field(ti.i32, MAX_THETAS)
+    # per block of θ rows: its counts are stale (a new accumulator) and read as zeros; the first
+    # vote clears them where it is about to count (a separate clearing pass over the whole
+    # accumulator cost 3 ms per tile, and the vote then fetched every line from memory again)
+    fresh = ti.field(ti.i32, MAX_THETAS // B)
+
+    @ti.func
+    def clear_block(blk, n_rho):
+        base = blk * B * n_rho
+        for k in range(B * n_rho):
+            flat[base + k] = 0
+        fresh[blk] = 0
 
     @ti.func
     def rescan(j, n_rho):
@@ -90,6 +101,8 @@ def _build(ti, cells: int):
         for t in range(n_blocks * S):
             if t % S == 0:
                 j0 = (t // S) * B
+                if fresh[t // S]:
+                    clear_block(t // S, n_rho)
                 cv = ti.Vector([cs[j0 + q] for q in ti.static(range(B))])
                 sv = ti.Vector([ss[j0 + q] for q in ti.static(range(B))])
                 row = ti.Vector([(j0 + q) * n_rho for q in ti.static(range(B))])
@@ -135,8 +148,8 @@ def _build(ti, cells: int):
         return ti.Vector([c, row_arg[c], row_max[c]])
 
     @ti.kernel
-    def reset(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1), m: ti.i32):
-        # a new accumulator: its θ factors (padding rows get 0) and m cells cleared
+    def reset(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        # a new accumulator: its θ factors (padding rows get 0), every block's counts stale
         ti.loop_config(serialize=on_cpu)
         for j in range(a.shape[0]):
             cs[j] = a[j]
@@ -144,16 +157,18 @@ def _build(ti, cells: int):
             row_max[j] = 0
             row_arg[j] = 0
             dirty[j] = 0
-        for i in range(m):
-            flat[i] = 0
+            if j % B == 0:
+                fresh[j // B] = 1
 
     @ti.kernel
-    def copy_out(out: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    def copy_out(out: ti.types.ndarray(dtype=ti.i32, ndim=1), n_rho: ti.i32):
         for i in range(out.shape[0]):
-            out[i] = flat[i]
+            out[i] = 0 if fresh[i // n_rho // B] else flat[i]
 
     @ti.kernel
     def clear_cell(j: ti.i32, k: ti.i32, n_rho: ti.i32):
+        if fresh[j // B]:
+            clear_block(j // B, n_rho)
         flat[j * n_rho + k] = 0
         dirty[j] = 1  # a lower count: the row's maximum still bounds it
 
@@ -188,7 +203,7 @@ class TaichiAccumulator:
             raise RuntimeError("a TaichiAccumulator is already open in this process; close it first")
         self.k = _kit(ti, rows * self.shape[1])
         pad = np.zeros(rows - len(cs), np.float32)
-        self.k["reset"](np.r_[cs, pad], np.r_[ss, pad], rows * self.shape[1])
+        self.k["reset"](np.r_[cs, pad], np.r_[ss, pad])
         _busy[0] = True
 
     def vote(self, x, y, sign: int = 1) -> None:
@@ -208,7 +223,7 @@ class TaichiAccumulator:
 
     def to_numpy(self) -> np.ndarray:
         out = np.empty(self.size, np.int32)  # the real rows come first
-        self.k["copy_out"](out)
+        self.k["copy_out"](out, self.shape[1])
         return out.reshape(self.shape)
 
     def close(self) -> None:
