@@ -38,7 +38,7 @@ TASK_STRIDE = 512
 POINTS_PER_PASS = 1 << 20  # points are voted in passes of at most this many
 MAX_THETAS = 1 << 15  # 0.0055° steps at the finest
 UNBOUNDED = 2**31 - 1  # the bound of a row whose counts grew
-CELLS = 1 << 24  # accumulator cells of the standard kit (64 MiB); larger ones get their own
+CELLS = 1 << 23  # accumulator cells of the standard kit (32 MiB: a default 110 m tile needs 4.8 M); larger ones get their own
 
 _kits: dict = {}
 _busy = [False]
