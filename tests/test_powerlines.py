@@ -529,3 +529,20 @@ def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():
         a.vote(x2, y2, 1)
         b.vote(x2, y2, 1)
         assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()
+
+
+def test_an_accumulator_larger_than_the_standard_kit_counts_the_same():
+    # more cells than the standard kit holds: a kit of its own is built for it
+    rng = np.random.default_rng(8)
+    x, y = rng.uniform(0, 300, 600), rng.uniform(0, 300, 600)
+    thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
+    assert len(thetas) * rows > hough_kernels.CELLS
+    c, s = np.cos(thetas), np.sin(thetas)
+    a = reference.NumpyAccumulator(c, s, k_min, 10.0, rows)
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as b:
+        a.vote(x, y, 1)
+        b.vote(x, y, 1)
+        assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()
+        a.vote(x[:200], y[:200], -1)
+        b.vote(x[:200], y[:200], -1)
+        assert a.peak() == b.peak()
