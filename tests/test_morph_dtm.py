@@ -340,6 +340,15 @@ def test_dtm_kernels_match_their_numpy_references():
         for name in core.MOMENTS:  # same sums, another order of addition
             assert got[name].flags.c_contiguous
             np.testing.assert_allclose(got[name], ref[name], rtol=1e-9, atol=1e-6)
+    some = rng.random(len(x)) < 0.6  # the moments of a subset, by mask
+    ref_some = core.cell_moments(grid, x[some], y[some], z[some])
+    masked_ref = core.cell_moments(grid, x, y, z, some)
+    for threads in (2, 1):
+        acc._threads = threads
+        got = acc.moments(grid, x, y, z, some)
+        for name in core.MOMENTS:
+            np.testing.assert_array_equal(masked_ref[name], ref_some[name])
+            np.testing.assert_allclose(got[name], ref_some[name], rtol=1e-9, atol=1e-6)
     zmin_ref, flat_ref = core.minimum_surface(grid, x, y, z)
     zmin, flat = acc.minimum_surface(grid, x, y, z)
     np.testing.assert_array_equal(flat, flat_ref)

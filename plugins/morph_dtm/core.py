@@ -283,7 +283,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     if refine and ground.sum() >= 3:
         # second pass: the surface fitted to the first pass's ground points (plane per cell)
         # follows the terrain between cell minima, so the same tolerance separates better
-        refined, _ = dtm_from_ground(grid, x[ground], y[ground], z[ground],
+        refined, _ = dtm_from_ground(grid, x, y, z, where=ground,
                                      moments=accel.moments if accel is not None else None, domain=domain)
         ground, dz = near(refined)
         ground &= ~noise
@@ -303,9 +303,12 @@ def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):
 MOMENTS = ("n", "x", "y", "z", "xx", "yy", "xy", "xz", "yz", "zz")
 
 
-def cell_moments(grid: Grid, x, y, z) -> dict:
+def cell_moments(grid: Grid, x, y, z, where=None) -> dict:
     """Per-cell sums of 1, dx, dy, z, dx², dy², dx·dy, dx·z, dy·z, z² with dx, dy the offsets of
-    each point from its cell's centre (numpy; the reference of the taichi kernel)."""
+    each point from its cell's centre, over the points ``where`` (a bool mask) is true, or all
+    (numpy; the reference of the taichi kernel)."""
+    if where is not None:
+        x, y, z = x[where], y[where], z[where]
     r, c = grid.index(x, y)
     xs, ys = grid.centres()
     dx = x - xs[c]
@@ -317,15 +320,16 @@ def cell_moments(grid: Grid, x, y, z) -> dict:
             for name, w in zip(MOMENTS, weights)}
 
 
-def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, domain=None):
-    """Bare-earth height at every cell centre from ground points.
+def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, domain=None, where=None):
+    """Bare-earth height at every cell centre from ground points (those ``where`` is true, when
+    given: a mask spares copying 10 million ground points out of the cloud).
 
     Each cell gets the least-squares plane through the ground points of its 3x3 neighbourhood,
     evaluated at the cell centre (unbiased on slopes, unlike a cell mean). Cells with too few
     points or a degenerate fit are holes, filled harmonically. Returns (dtm, support) where
     support marks cells computed from points (not interpolated).
     """
-    S = (moments or cell_moments)(grid, x, y, z)
+    S = (moments or cell_moments)(grid, x, y, z, where)
     cell = grid.cell
     # the per-cell sums are about each cell's own centre; moved to one frame (origin at the grid's
     # middle cell: small numbers) they add up over each 3x3 block as plain box sums, and are then

@@ -25,8 +25,8 @@ def _build(ti):
     @ti.kernel
     def moments_sliced(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
                        z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
-                       rows: ti.i32, cols: ti.i32, part: ti.types.ndarray(dtype=V10, ndim=2),
-                       out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+                       rows: ti.i32, cols: ti.i32, mask: ti.types.ndarray(dtype=ti.u8, ndim=1), masked: ti.i32,
+                       part: ti.types.ndarray(dtype=V10, ndim=2), out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
         # slice p of the points into grid copy p; one slice per thread: the loop runs over
         # slices x TASK_STRIDE iterations so that each slice lands in another thread's chunk
         slices = part.shape[0]
@@ -37,15 +37,16 @@ def _build(ti):
                 lo = ti.cast(ti.cast(n, ti.i64) * p // slices, ti.i32)
                 hi = ti.cast(ti.cast(n, ti.i64) * (p + 1) // slices, ti.i32)
                 for i in range(lo, hi):
-                    c = ti.min(ti.max(ti.cast((x[i] - west) / cell, ti.i32), 0), cols - 1)
-                    r = ti.min(ti.max(ti.cast((north - y[i]) / cell, ti.i32), 0), rows - 1)
-                    f = r * cols + c
-                    dx = x[i] - (west + (ti.cast(c, ti.f64) + 0.5) * cell)
-                    dy = y[i] - (north - (ti.cast(r, ti.f64) + 0.5) * cell)
-                    zi = z[i]
-                    # a plain load and store (not +=, which would be atomic): the slice is ours
-                    part[p, f] = part[p, f] + ti.Vector([1.0, dx, dy, zi, dx * dx, dy * dy, dx * dy, dx * zi,
-                                                         dy * zi, zi * zi])
+                    if masked == 0 or mask[i] != 0:
+                        c = ti.min(ti.max(ti.cast((x[i] - west) / cell, ti.i32), 0), cols - 1)
+                        r = ti.min(ti.max(ti.cast((north - y[i]) / cell, ti.i32), 0), rows - 1)
+                        f = r * cols + c
+                        dx = x[i] - (west + (ti.cast(c, ti.f64) + 0.5) * cell)
+                        dy = y[i] - (north - (ti.cast(r, ti.f64) + 0.5) * cell)
+                        zi = z[i]
+                        # a plain load and store (not +=, which would be atomic): the slice is ours
+                        part[p, f] = part[p, f] + ti.Vector([1.0, dx, dy, zi, dx * dx, dy * dy, dx * dy,
+                                                             dx * zi, dy * zi, zi * zi])
         # the copies added up, one grid per moment (in numpy, the sum and the transposition took
         # twice as long as the scatter)
         for f in range(part.shape[1]):
@@ -58,10 +59,12 @@ def _build(ti):
     @ti.kernel
     def moments(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
                 z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
-                out: ti.types.ndarray(dtype=ti.f64, ndim=3)):
+                mask: ti.types.ndarray(dtype=ti.u8, ndim=1), masked: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=3)):
         rows = out.shape[1]
         cols = out.shape[2]
         for i in range(x.shape[0]):
+            if masked != 0 and mask[i] == 0:
+                continue
             c = ti.min(ti.max(ti.cast((x[i] - west) / cell, ti.i32), 0), cols - 1)
             r = ti.min(ti.max(ti.cast((north - y[i]) / cell, ti.i32), 0), rows - 1)
             dx = x[i] - (west + (ti.cast(c, ti.f64) + 0.5) * cell)
@@ -151,8 +154,12 @@ class TaichiAccel:
         cfg = ti.lang.impl.current_cfg()
         self._threads = int(cfg.cpu_max_num_threads) if cfg.arch in (ti.x64, ti.arm64) else 0  # 0: not a CPU
 
-    def moments(self, grid, x, y, z) -> dict:
+    def moments(self, grid, x, y, z, where=None) -> dict:
+        """Kernel twin of ``core.cell_moments`` (``where``: the points to sum, a bool mask; the
+        kernel skips the others instead of the caller copying the rest out)."""
         x, y, z = (np.ascontiguousarray(a, np.float64) for a in (x, y, z))
+        mask = np.zeros(1, np.uint8) if where is None else np.ascontiguousarray(where).view(np.uint8)
+        masked = int(where is not None)
         cells = grid.rows * grid.cols
         # one slice per thread while the copies stay small and each slice has points to sum
         slices = max(min(self._threads, SLICE_GRID_BYTES // (cells * len(MOMENTS) * 8), len(x) // 10_000), 1)
@@ -160,12 +167,12 @@ class TaichiAccel:
             part = np.zeros((slices, cells, len(MOMENTS)), np.float64)
             out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
             if len(x):
-                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, part,
-                                     out.reshape(len(MOMENTS), cells))
+                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, mask, masked,
+                                     part, out.reshape(len(MOMENTS), cells))
         else:  # a GPU: one shared grid, atomic adds
             out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
             if len(x):
-                self._moments(x, y, z, grid.west, grid.north, grid.cell, out)
+                self._moments(x, y, z, grid.west, grid.north, grid.cell, mask, masked, out)
         return {name: out[k] for k, name in enumerate(MOMENTS)}
 
     def minimum_surface(self, grid, x, y, z):

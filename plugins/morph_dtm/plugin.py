@@ -125,7 +125,7 @@ def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
     if g.sum() < 3:
         raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
     inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
-    dtm, _ = dtm_from_ground(grid, pc.x[g], pc.y[g], pc.z[g], moments=accel.moments if accel is not None else None,
+    dtm, _ = dtm_from_ground(grid, pc.x, pc.y, pc.z, where=g, moments=accel.moments if accel is not None else None,
                              domain=inside)
     dtm = np.where(inside, dtm, np.nan).astype(np.float32)
     return Raster(dtm, Affine(grid.cell, 0, grid.west, 0, -grid.cell, grid.north), crs=pc.crs,
