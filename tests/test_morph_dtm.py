@@ -334,7 +334,10 @@ def test_dtm_kernels_match_their_numpy_references():
     z = 300 + 0.3 * x - 0.1 * y + rng.normal(0, 0.2, len(x))
     grid = core.Grid.around(x, y, 1.5)
     ref = core.cell_moments(grid, x, y, z)
-    for threads in (acc._threads, 1, 3):  # the points split into 2, 1 and 3 per-thread slices
+    # the points split into 2, 1 and 3 per-thread slices; 0: the shared-grid kernel with atomic
+    # adds that a GPU runs (run here on the CPU)
+    threads0 = acc._threads
+    for threads in (threads0, 1, 3, 0):
         acc._threads = threads
         got = acc.moments(grid, x, y, z)
         for name in core.MOMENTS:  # same sums, another order of addition
@@ -343,12 +346,13 @@ def test_dtm_kernels_match_their_numpy_references():
     some = rng.random(len(x)) < 0.6  # the moments of a subset, by mask
     ref_some = core.cell_moments(grid, x[some], y[some], z[some])
     masked_ref = core.cell_moments(grid, x, y, z, some)
-    for threads in (2, 1):
+    for threads in (2, 1, 0):
         acc._threads = threads
         got = acc.moments(grid, x, y, z, some)
         for name in core.MOMENTS:
             np.testing.assert_array_equal(masked_ref[name], ref_some[name])
             np.testing.assert_allclose(got[name], ref_some[name], rtol=1e-9, atol=1e-6)
+    acc._threads = threads0
     zmin_ref, flat_ref = core.minimum_surface(grid, x, y, z)
     zmin, flat = acc.minimum_surface(grid, x, y, z)
     np.testing.assert_array_equal(flat, flat_ref)

@@ -158,7 +158,7 @@ class TaichiAccel:
         """Kernel twin of ``core.cell_moments`` (``where``: the points to sum, a bool mask; the
         kernel skips the others instead of the caller copying the rest out)."""
         x, y, z = (np.ascontiguousarray(a, np.float64) for a in (x, y, z))
-        mask = np.zeros(1, np.uint8) if where is None else np.ascontiguousarray(where).view(np.uint8)
+        mask = np.zeros(1, np.uint8) if where is None else np.ascontiguousarray(where, dtype=bool).view(np.uint8)
         masked = int(where is not None)
         cells = grid.rows * grid.cols
         # one slice per thread while the copies stay small and each slice has points to sum
