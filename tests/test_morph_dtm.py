@@ -357,9 +357,7 @@ def test_dtm_kernels_match_their_numpy_references():
     zmin, flat = acc.minimum_surface(grid, x, y, z)
     np.testing.assert_array_equal(flat, flat_ref)
     np.testing.assert_array_equal(zmin, zmin_ref)  # a minimum is exact
-    surface = rng.normal(0, 1, (grid.rows, grid.cols))
-    np.testing.assert_allclose(acc.sampler(grid, x, y)(surface), core.Sampler(grid, x, y)(surface), rtol=0, atol=1e-12)
-    surface = 300 + 0.3 * grid.centres()[0][None, :] - 0.1 * grid.centres()[1][:, None] + rng.normal(0, 0.1, surface.shape)
+    surface = 300 + 0.3 * grid.centres()[0][None, :] - 0.1 * grid.centres()[1][:, None] + rng.normal(0, 0.1, (grid.rows, grid.cols))
     slope = core.surface_slope(surface, grid.cell)
     near_ref, dz_ref = core._near_surface(core.Sampler(grid, x, y), grid.cell, surface, z, 0.05, 0.2, 0.3)
     near, dz = acc.near_surface(grid, x, y, z, surface, slope, 0.05, 0.2, 0.3)

@@ -82,25 +82,6 @@ def _build(ti):
             ti.atomic_add(out[9, r, c], zi * zi)
 
     @ti.kernel
-    def bilinear(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                 surface: ti.types.ndarray(dtype=ti.f64, ndim=2), west: ti.f64, north: ti.f64, cell: ti.f64,
-                 out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-        rows = surface.shape[0]
-        cols = surface.shape[1]
-        for i in range(x.shape[0]):
-            r = ti.min(ti.max((north - y[i]) / cell - 0.5, 0.0), ti.cast(rows - 1, ti.f64))
-            c = ti.min(ti.max((x[i] - west) / cell - 0.5, 0.0), ti.cast(cols - 1, ti.f64))
-            r0 = ti.min(ti.cast(r, ti.i32), ti.max(rows - 2, 0))
-            c0 = ti.min(ti.cast(c, ti.i32), ti.max(cols - 2, 0))
-            fr = r - ti.cast(r0, ti.f64)
-            fc = c - ti.cast(c0, ti.f64)
-            r1 = ti.min(r0 + 1, rows - 1)
-            c1 = ti.min(c0 + 1, cols - 1)
-            top = surface[r0, c0] * (1.0 - fc) + surface[r0, c1] * fc
-            bot = surface[r1, c0] * (1.0 - fc) + surface[r1, c1] * fc
-            out[i] = top * (1.0 - fr) + bot * fr
-
-    @ti.kernel
     def cell_min(x: ti.types.ndarray(dtype=ti.f64, ndim=1), y: ti.types.ndarray(dtype=ti.f64, ndim=1),
                  z: ti.types.ndarray(dtype=ti.f64, ndim=1), west: ti.f64, north: ti.f64, cell: ti.f64,
                  rows: ti.i32, cols: ti.i32, flat: ti.types.ndarray(dtype=ti.i64, ndim=1),
@@ -140,7 +121,7 @@ def _build(ti):
             dz[i] = d
             near[i] = ti.cast((d <= tol) and (d >= -below), ti.u8)
 
-    return moments, moments_sliced, bilinear, cell_min, near_surface
+    return moments, moments_sliced, cell_min, near_surface
 
 
 class TaichiAccel:
@@ -150,7 +131,7 @@ class TaichiAccel:
         global _k
         if _k is None:
             _k = _build(ti)
-        self._moments, self._moments_sliced, self._bilinear, self._cell_min, self._near_surface = _k
+        self._moments, self._moments_sliced, self._cell_min, self._near_surface = _k
         cfg = ti.lang.impl.current_cfg()
         self._threads = int(cfg.cpu_max_num_threads) if cfg.arch in (ti.x64, ti.arm64) else 0  # 0: not a CPU
 
@@ -196,14 +177,3 @@ class TaichiAccel:
                                np.ascontiguousarray(slope, np.float64), grid.west, grid.north, grid.cell,
                                float(threshold), float(slope_factor), float(below), near, dz)
         return near.view(bool), dz
-
-    def sampler(self, grid, x, y):
-        x = np.ascontiguousarray(x, np.float64)
-        y = np.ascontiguousarray(y, np.float64)
-
-        def sample(surface):
-            out = np.empty(len(x), np.float64)
-            self._bilinear(x, y, np.ascontiguousarray(surface, np.float64), grid.west, grid.north, grid.cell, out)
-            return out
-
-        return sample
