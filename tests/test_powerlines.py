@@ -234,6 +234,27 @@ def test_catenary_fit_and_span_split():
     assert c == pytest.approx(1000, rel=0.02) and s0 == pytest.approx(100, abs=1) and rms < 0.04
 
 
+def test_catenary_fit_minimises_the_soft_l1_cost_as_scipy_does():
+    # the fit runs Levenberg-Marquardt on residuals transformed so that their squares sum to the
+    # soft-L1 cost: on a span with outliers (an insulator, birds) it must land where scipy's
+    # robust trust-region solver lands
+    from scipy.optimize import least_squares
+
+    rng = np.random.default_rng(5)
+    s = np.sort(rng.uniform(0, 180, 400))
+    z = catenary(s, 320.0, 95.0, 1100.0) + rng.normal(0, 0.03, len(s))
+    z[rng.choice(len(s), 30, replace=False)] += rng.uniform(0.5, 3.0, 30)  # outliers above the wire
+    z0, s0, c, rms = fit_catenary(s, z)
+
+    def res(p):
+        return catenary(s, p[0], p[1], np.exp(p[2])) - z
+
+    ref = least_squares(res, [z0 + 0.3, s0 + 5, np.log(c) + 0.1], loss="soft_l1", f_scale=0.1, xtol=1e-12,
+                        ftol=1e-12, gtol=1e-12).x
+    assert np.abs(catenary(s, z0, s0, c) - catenary(s, ref[0], ref[1], np.exp(ref[2]))).max() < 1e-4
+    assert c == pytest.approx(1100, rel=0.02) and rms < 0.04  # the outliers did not pull it up
+
+
 def test_catenary_fit_of_a_short_nearly_straight_piece_prints_no_warning():
     """A 8.5 m piece from the corridor scene whose trial steps overflow cosh: the solver rejects
     them, and no RuntimeWarning reaches the user's terminal."""

@@ -205,13 +205,28 @@ def fit_catenary(s, z):
             sh = np.sinh(u)
             return np.column_stack([np.ones_like(s), -sh, c * (np.cosh(u) - 1.0) - (s - p[1]) * sh])
 
-    # 50 evaluations settle every well-posed span (19 on average on the corridor scene); short,
-    # tight pieces whose c is barely determined crawl along a flat valley up to scipy's 300
-    # without converging, for an rms that changes by a millimetre
-    # (a trial step to a tiny c makes cosh overflow: the solver rejects that step; its loss
-    # squaring the huge residuals must not print a warning to the user)
+    # The robust soft-L1 cost sum(f² ρ((r/f)²)), ρ(t) = 2(√(1+t) − 1), f = 0.1 m, written as plain
+    # least squares of r̃ = r·√(2/(q+1)), q = √(1+(r/f)²) (Σ r̃² is exactly that cost), so that
+    # MINPACK's Levenberg-Marquardt minimises it: the same minimum as scipy's trust-region solver
+    # with loss="soft_l1" (to 0.1 mm on 99 AHN4 and corridor spans) at 60 % of its time.
+    def res_robust(p):
+        r = res(p)
+        with np.errstate(invalid="ignore"):  # an overflowed trial step stays infinite: rejected
+            return np.where(np.isfinite(r), r * np.sqrt(2.0 / (np.sqrt(1.0 + (r / 0.1) ** 2) + 1.0)), r)
+
+    def jac_robust(p):
+        u = res(p) / 0.1
+        q = np.sqrt(1.0 + u * u)
+        return jac(p) * (np.sqrt(2.0 / (q + 1.0)) * (1.0 - u * u / (2.0 * q * (q + 1.0))))[:, None]
+
+    # 50 evaluations settle every well-posed span; short, tight pieces whose c is barely
+    # determined crawl along a flat valley without converging, for an rms that changes by a
+    # millimetre (a trial step to a tiny c makes cosh overflow: the solver rejects that step, and
+    # must not print a warning to the user)
     with np.errstate(over="ignore", invalid="ignore"):
-        sol = least_squares(res, [z00, s00, np.log(c0)], jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50)
+        x0 = [z00, s00, np.log(c0)]
+        sol = least_squares(res_robust, x0, jac=jac_robust, method="lm", max_nfev=50) if len(s) >= 3 else \
+            least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50)
     z0, s0, lc = sol.x
     r = res(sol.x)
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit
