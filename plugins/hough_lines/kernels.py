@@ -3,9 +3,11 @@ band's votes and finding the peak, with the votes kept in taichi memory (only pe
 ``reference.NumpyAccumulator`` is the numpy twin; both bin with :func:`reference.bin_scales`.
 
 Why it is written this way (each measured on the 2-core CI machine, 20 000 points × 1800 θ):
-- one task owns a block of ``THETA_BLOCK`` θ rows, so there are no atomics (taichi makes ``+=`` on
-  global memory atomic; a plain load/store is 2× faster) and each point loaded feeds 16
+- one task owns each block of ``THETA_BLOCK`` θ rows, so there are no atomics (taichi makes ``+=``
+  on global memory atomic; a plain load/store is 2× faster) and each point loaded feeds 16
   independent increments (instruction-level parallelism instead of one dependent chain);
+- a new accumulator is not cleared in a pass of its own: each block is zeroed by the first vote
+  that touches it (per-block ``fresh`` flags), while it is in cache for the votes;
 - the votes live in taichi *fields*, whose addressing compiles to constants: the same loop over
   ndarrays (a pointer and stride load per access) was 3–4× slower;
 - the fields have a fixed capacity and the kernels name them directly (not as template
@@ -19,8 +21,8 @@ Why it is written this way (each measured on the 2-core CI machine, 20 000 point
   even when the offline cache holds the machine code), so the θ rows are padded to whole blocks
   (no remainder loop), the band-subtraction flags are always computed (no second variant: the
   compare costs nothing measurable beside the scattered increments) and small steps are merged;
-- handing a loop to taichi's CPU thread pool costs about 0.1 ms (0.15 ms with the launch), about
-  what subtracting a band of 300 points costs. So the band's subtraction only flags the rows whose
+- handing a loop to taichi's CPU thread pool costs 0.15-0.25 ms with the launch (even an empty
+  loop), about what subtracting a band of 300 points costs. So the band's subtraction only flags the rows whose
   peak cell lost votes, and the peak search is one *serial* kernel: it rescans dirty rows only
   while their old maximum (an upper bound) could still win, the highest bound first. Before, a
   parallel rescan kernel ran 1-3 times per peak (0.9 ms per peak on AHN4; now 0.3-0.5 ms). Rescanning
