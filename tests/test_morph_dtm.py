@@ -377,3 +377,23 @@ def test_hillshade_in_row_blocks_equals_whole(multidirectional):
     whole = core.hillshade(dem, 1.0, -1.0, multidirectional=multidirectional, block_rows=10**9)
     blocks = core.hillshade(dem, 1.0, -1.0, multidirectional=multidirectional, block_rows=64)
     assert np.array_equal(whole, blocks)
+
+
+def test_low_outliers_and_the_minimum_without_them_match_full_recomputation():
+    rng = np.random.default_rng(11)
+    x, y = rng.uniform(0, 200, 60_000), rng.uniform(0, 150, 60_000)
+    z = 100 + 0.05 * x + rng.normal(0, 0.1, len(x))
+    pits = rng.choice(len(x), 40, replace=False)
+    z[pits] -= rng.uniform(3, 20, len(pits))  # isolated low outliers
+    grid = core.Grid.around(x, y, 2.0)
+    zmin, flat = core.minimum_surface(grid, x, y, z)
+    noise = core.low_outliers(grid, z, flat, zmin, 2.0)
+    # the definition, over every point
+    filled = np.where(np.isnan(zmin), np.inf, zmin)
+    second = ndimage.rank_filter(filled, 1, size=3, mode="nearest")
+    bad = (np.isfinite(second) & (filled < second - 2.0)).ravel()[flat] & (z < second.ravel()[flat] - 2.0)
+    np.testing.assert_array_equal(noise, bad)
+    assert 30 <= noise.sum() <= 40 and noise[pits].mean() > 0.7
+    got = core.minimum_surface_without(grid, zmin, flat, z, noise)
+    want, _ = core.minimum_surface(grid, None, None, z[~noise], flat[~noise])
+    np.testing.assert_array_equal(got, want)  # NaN where a cell held only removed points
