@@ -106,6 +106,10 @@ def test_fill_holes_inside_a_footprint_only():
     # the same holes without a domain: the same values inside the strip
     whole = core.fill_holes(np.where(known, plane, np.nan), known)
     np.testing.assert_allclose(filled[strip], whole[strip], atol=1e-6)
+    # leaving the outside alone: the same inside the footprint (the island too), NaN outside
+    inside_only = core.fill_holes(np.where(known, plane, np.nan), known, domain, fill_outside=False)
+    np.testing.assert_array_equal(inside_only[domain], filled[domain])
+    assert np.isnan(inside_only[outside]).all()
 
 
 def test_dtm_from_ground_is_unbiased_on_a_steep_plane():

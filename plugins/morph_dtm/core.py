@@ -115,7 +115,8 @@ def footprint(occupied: np.ndarray, radius_cells: int) -> np.ndarray:
     return ndimage.binary_fill_holes(closed | occupied)
 
 
-def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.ndarray | None = None) -> np.ndarray:
+def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.ndarray | None = None,
+               fill_outside: bool = True) -> np.ndarray:
     """Fill unknown cells with the harmonic (Laplace) interpolation of the known cells around them.
 
     One sparse system over all unknown cells (4-neighbour Laplacian, known cells as Dirichlet
@@ -125,7 +126,9 @@ def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.
     ``domain`` (optional) limits the system to unknown cells inside it (the data's footprint):
     the rest of the grid, outside the survey, takes the value of the nearest filled cell. A
     corridor strip crossing its bounding box diagonally leaves most of the box outside, and
-    solving the Laplace system there cost more than the whole ground filter.
+    solving the Laplace system there cost more than the whole ground filter. With
+    ``fill_outside=False`` the cells outside ``domain`` stay as they are (a caller that blanks
+    them anyway saves the distance transform: 60-70 ms on a 10 M-point tile's 1 m grid).
     """
     out = np.array(surface, dtype=np.float64, copy=True)
     if known is None:
@@ -167,6 +170,8 @@ def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.
                               shape=(m, m))
         out[rr, cc] = spsolve(A, rhs)
     rest = ~known & ~unknown
+    if not fill_outside and domain is not None:
+        rest &= domain
     if rest.any():
         filled = known | unknown
         idx = ndimage.distance_transform_edt(~filled, return_distances=False, return_indices=True)
@@ -337,7 +342,8 @@ def cell_moments(grid: Grid, x, y, z, where=None) -> dict:
             for name, w in zip(MOMENTS, weights)}
 
 
-def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, domain=None, where=None):
+def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, domain=None, where=None,
+                    fill_outside: bool = True):
     """Bare-earth height at every cell centre from ground points (those ``where`` is true, when
     given: a mask spares copying 10 million ground points out of the cloud).
 
@@ -386,7 +392,7 @@ def dtm_from_ground(grid: Grid, x, y, z, min_points: int = 3, moments=None, doma
     zhi = mean3 + 2.5 * sd3 + 0.5 * cell
     value = np.where(np.isfinite(value) & np.isfinite(mean3), np.clip(value, zlo, zhi), value)
     known = np.isfinite(value)
-    return fill_holes(value, known, domain), known
+    return fill_holes(value, known, domain, fill_outside), known
 
 
 def _box3_sum(a: np.ndarray) -> np.ndarray:

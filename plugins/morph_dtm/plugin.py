@@ -126,7 +126,7 @@ def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
         raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
     inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
     dtm, _ = dtm_from_ground(grid, pc.x, pc.y, pc.z, where=g, moments=accel.moments if accel is not None else None,
-                             domain=inside)
+                             domain=inside, fill_outside=False)  # outside the footprint is nodata
     dtm = np.where(inside, dtm, np.nan).astype(np.float32)
     return Raster(dtm, Affine(grid.cell, 0, grid.west, 0, -grid.cell, grid.north), crs=pc.crs,
                   nodata=float("nan"), style="dtm", description="bare-earth DTM (morphological filter)"), grid
