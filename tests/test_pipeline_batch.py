@@ -11,6 +11,7 @@ import pytest
 from importlib.metadata import EntryPoint
 
 from toolbox.registry import discover
+from toolbox import runner
 from toolbox.runner import run_algorithm
 
 
@@ -130,6 +131,32 @@ def test_an_output_emitted_early_is_removed_when_the_run_fails(small_scene, tmp_
     src = laspy.read(small_scene)
     assert np.all(back.classification == 9)
     assert np.array_equal(back.intensity, src.intensity) and np.array_equal(back.gps_time, src.gps_time)
+
+
+def test_a_raster_emitted_early_is_written_in_the_background_and_removed_when_the_run_fails(small_scene, tmp_path):
+    import threading
+
+    reg = discover([EntryPoint(name="emitting", value="plugins_for_tests.fakes:emitting", group="toolbox.plugins")])
+    out = tmp_path / "x.laz"
+    with pytest.raises(RuntimeError, match="boom after emitting a raster"):
+        run_algorithm("emit-raster", [str(small_scene)], out, {"mode": "exact"}, reg=reg)
+    assert list(tmp_path.iterdir()) == []
+    seen = []
+    real = runner.write_output
+
+    def spy(kind, *args, **kw):
+        seen.append((kind, threading.current_thread() is threading.main_thread()))
+        return real(kind, *args, **kw)
+
+    runner.write_output = spy
+    try:
+        rep = run_algorithm("emit-raster", [str(small_scene)], out, {}, reg=reg)
+    finally:
+        runner.write_output = real
+    # the emitted raster went to a writer thread; the points (lazrs holds the GIL) were written here
+    assert sorted(seen) == [("points", True), ("raster", False)]
+    assert rep["outputs"]["grid"]["width"] == 8 and (tmp_path / "x_grid.tif").exists()
+    assert np.all(laspy.read(out).classification == 4)
 
 
 def test_python_api_mirrors_the_cli(tmp_path):

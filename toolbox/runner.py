@@ -62,11 +62,12 @@ class Context:
         return kernels.taichi()
 
     def emit(self, output_name: str, value: Any) -> None:
-        """Hand over a finished output early: the host starts writing it in the background while
-        the algorithm goes on (a raster or vector is written beside the remaining computation; a
-        LAZ holds the GIL while it compresses, see ``_OutputWriter``). The value
-        must still be returned in the Result, and must not be changed afterwards. Outside a file
-        run (``ctx.call``) this does nothing."""
+        """Hand over a finished output early. A raster, image or vector is then written in the
+        background, beside the remaining computation (GDAL releases the GIL); a point cloud is
+        queued and written when the run ends (lazrs holds the GIL while it compresses, so it
+        would only take turns with the computation; see ``_OutputWriter``). The value must still
+        be returned in the Result, and must not be changed afterwards. Outside a file run
+        (``ctx.call``) this does nothing."""
         if self._writer is not None:
             self._writer.submit(output_name, value)
 
@@ -255,20 +256,30 @@ def _json_default(o):
 
 
 class _OutputWriter:
-    """Writes a run's outputs in background threads and collects their summaries. GDAL releases
-    the GIL while it writes, so rasters and vectors are written beside the computation and each
-    other. lazrs does not (0.8: its compressor holds the GIL, also ``compress_points``; measured, a
-    Python thread beside it ran at a fifth of its speed): a LAZ output emitted early is written
-    *instead of* the computation, not beside it, and costs the same time either way; with more
-    than one chunk its compression runs on all cores."""
+    """Writes a run's outputs and collects their summaries. An output emitted early by the
+    algorithm is written in a background thread beside the remaining computation when its writer
+    releases the GIL (GDAL: rasters, images, vectors). lazrs does not (0.8: its compressor holds
+    the GIL, also ``compress_points``; measured, a Python thread beside it ran at a fifth of its
+    speed): a point output is queued and written by ``finish``. ``finish`` writes what is left in
+    the calling thread, one after the other: a GeoTIFF thread beside a LAZ written here took turns
+    at the GIL with it and both got slower (AHN3's 43 k points: LAZ 17 ms + DTM 8 ms one after the
+    other, 34 ms side by side). With more than one chunk the LAZ compression runs on all cores."""
+
+    GIL_BOUND = ("points",)
 
     def __init__(self, kinds: dict, paths: dict, style_dirs, overwrite: bool):
         self.kinds, self.paths, self.style_dirs, self.overwrite = kinds, paths, style_dirs, overwrite
         self.futures: dict[str, Any] = {}
+        self.held: dict[str, Any] = {}  # GIL-bound outputs, written by finish
         self._pool = None
 
-    def submit(self, name: str, value: Any) -> None:
-        if value is None or name not in self.paths or name in self.futures:
+    def submit(self, name: str, value: Any, early: bool = True) -> None:
+        """Start writing an output emitted early, or queue it for ``finish`` (a GIL-bound one, or
+        one handed over when the computation has ended: ``early=False``)."""
+        if value is None or name not in self.paths or name in self.futures or name in self.held:
+            return
+        if not early or self.kinds[name] in self.GIL_BOUND:
+            self.held[name] = value
             return
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
@@ -278,7 +289,19 @@ class _OutputWriter:
                                                self.style_dirs, self.overwrite)
 
     def finish(self) -> dict:
-        """Wait for every write; the summaries, or the first error (after all have ended)."""
+        """Write the queued outputs here, wait for those in flight; the summaries, or the first
+        error (after all have ended)."""
+        from concurrent.futures import Future
+
+        for name, value in self.held.items():
+            fut = Future()
+            try:
+                fut.set_result(write_output(self.kinds[name], value, self.paths[name], self.style_dirs,
+                                            self.overwrite))
+            except BaseException as exc:  # noqa: BLE001 - reported below with the others
+                fut.set_exception(exc)
+            self.futures[name] = fut
+        self.held.clear()
         written, error = {}, None
         for name, fut in self.futures.items():
             try:
@@ -396,7 +419,7 @@ def run_algorithm(
                             "the input") from None
         t_compute = time.perf_counter()
         for name, value in result.outputs.items():
-            writer.submit(name, value)  # outputs not emitted early; the others are skipped
+            writer.submit(name, value, early=False)  # those not emitted early
         written = writer.finish()
     except BaseException:
         # a failed run or write leaves no file of this run behind, also none already written

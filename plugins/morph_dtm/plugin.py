@@ -169,7 +169,6 @@ def _run_dtm(inputs, params, ctx):
     cls[ground] = 2
     cls[noise] = 7
     classified = pc.with_fields(classification=cls)
-    ctx.emit("classified", classified)  # its LAZ is written (on all cores when large) beside the DTM
     dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
     t2 = time.perf_counter()
     out = {"dtm": dtm, "classified": classified}

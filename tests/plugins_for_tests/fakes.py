@@ -35,6 +35,27 @@ def _emit_then_finish(inputs, params, ctx):
     return {"points": out}
 
 
+def _raster_of(pc):
+    from affine import Affine
+
+    from toolbox.io.rasters import Raster
+
+    w, s, e, n = pc.bounds()
+    return Raster(np.ones((8, 8), np.float32), Affine((e - w) / 8, 0, w, 0, -(n - s) / 8, n), crs=pc.crs)
+
+
+def _emit_raster(inputs, params, ctx):
+    """Hands a raster over early (GDAL writes it in a background thread), then fails or finishes."""
+    import time
+
+    pc = inputs["points"]
+    ctx.emit("grid", _raster_of(pc))
+    time.sleep(0.5)  # the background write completes meanwhile
+    if params["mode"] == "exact":
+        raise RuntimeError("boom after emitting a raster")
+    return {"grid": _raster_of(pc), "points": pc.with_fields(classification=np.full(len(pc), 4, np.uint8))}
+
+
 def _alg(id_, run=_echo):
     return Algorithm(
         id=id_, title="test " + id_, description="test algorithm", run=run,
@@ -56,7 +77,9 @@ class Good:
 class Emitting:
     @toolbox.hookimpl
     def toolbox_algorithms(self):
-        return [_alg("emit-then-fail", _emit_then_fail), _alg("emit-then-finish", _emit_then_finish)]
+        with_raster = _alg("emit-raster", _emit_raster)
+        with_raster.outputs = [*with_raster.outputs, Output("grid", "raster", "a grid", suffix="_grid")]
+        return [_alg("emit-then-fail", _emit_then_fail), _alg("emit-then-finish", _emit_then_finish), with_raster]
 
 
 class Clash:
