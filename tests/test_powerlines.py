@@ -73,6 +73,34 @@ def test_taichi_accumulator_equals_numpy_reference(n, seed, theta_step):
             assert a.peak() == b.peak()
 
 
+def test_a_subtraction_with_a_floor_keeps_every_row_that_can_still_peak_exact():
+    """Rows bounded below the floor may keep their votes (whole θ blocks are skipped); every row
+    that can still hold a peak of ``floor`` votes or more counts exactly as numpy's, and so the
+    peak does."""
+    rng = np.random.default_rng(5)
+    t = rng.uniform(0, 100, 800)
+    x = np.r_[t, rng.uniform(0, 110, 1500)]
+    y = np.r_[30 + 0.2 * t + rng.normal(0, 0.03, 800), rng.uniform(0, 110, 1500)]
+    thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
+    c, s = np.cos(thetas), np.sin(thetas)
+    floor = 15
+    a = reference.NumpyAccumulator(c, s, k_min, 10.0, rows)
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as b:
+        a.vote(x, y)
+        b.vote(x, y)
+        assert a.peak() == b.peak()  # the rows' maxima are known from here on
+        for sub in (slice(0, 300), slice(300, 600), slice(800, 1000)):  # 200 points of the line stay
+            a.vote(x[sub], y[sub], -1, floor=floor)
+            b.vote(x[sub], y[sub], -1, floor=floor)
+            ref, got = a.to_numpy(), b.to_numpy()
+            live = ref.max(axis=1) >= floor
+            assert np.array_equal(ref[live], got[live])
+            assert a.peak() == b.peak() or (a.peak()[2] < floor and b.peak()[2] < floor)
+        # rows were skipped (their counts still hold the subtracted votes), never below the truth
+        assert not np.array_equal(ref, got) and np.all(got >= ref)
+        assert a.peak()[2] >= floor
+
+
 @pytest.mark.parametrize("x0, y0", [(0, 0), (-110, 0), (-55, -55), (0, -110)])
 def test_accumulator_rho_range_holds_every_vote_and_no_more(x0, y0):
     """The ρ range is the method's min/max computed ρ: every point binned at every θ falls

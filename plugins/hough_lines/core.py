@@ -174,7 +174,7 @@ def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m
         if len(band) == 0:
             acc.clear_cell(c, r)  # numerically isolated cell: clear it
             continue
-        acc.vote(x[band], y[band], -1)
+        acc.vote(x[band], y[band], -1, floor=min_votes)  # rows below min_votes are done with
         active[band] = False
         if len(lines) >= max_lines:
             break

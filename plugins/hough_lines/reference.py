@@ -40,8 +40,13 @@ class NumpyAccumulator:
         self.cs, self.ss, self.off = bin_scales(cos_t, sin_t, k_min, inv_drho)
         self.acc = np.zeros((len(self.cs), int(n_rho)), np.int32)
 
-    def vote(self, x, y, sign: int = 1) -> None:
-        """Add (``sign`` = 1) or subtract (-1) one vote per point and θ."""
+    def vote(self, x, y, sign: int = 1, floor: int = 0) -> None:
+        """Add (``sign`` = 1) or subtract (-1) one vote per point and θ.
+
+        The contract of a subtraction with ``floor`` > 0: rows whose largest count is below
+        ``floor`` may keep their votes (a kernel skips them: they can no longer hold a peak of
+        ``floor`` votes), so :meth:`peak` stays exact whenever it returns ``floor`` votes or more
+        and is below ``floor`` otherwise. This reference subtracts everywhere."""
         n_theta, n_rho = self.acc.shape
         x = np.asarray(x, np.float32)
         y = np.asarray(y, np.float32)
