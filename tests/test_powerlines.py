@@ -511,6 +511,31 @@ def test_neighbourhood_covariances_equal_centred_products():
     got = neighbourhood_covariances(xyz, idx)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
     assert np.array_equal(got, got.transpose(0, 2, 1))
+    assert np.array_equal(neighbourhood_covariances(xyz, idx, chunk=700), got)  # chunks are exact
+
+
+@pytest.mark.parametrize("density", [2.0, 30.0])  # 4 and 48 points needed within 1 m: k=12 answers, or not
+def test_surface_density_rule_counts_the_points_within_one_metre(density):
+    """Planar and rugged neighbourhoods must hold half the survey's density within radius 1 (a
+    count of the ball, its definition); shape_classes decides it from nearest-neighbour distances."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines.core import shape_classes
+
+    rng = np.random.default_rng(4)
+    roof = np.column_stack([rng.uniform(0, 20, 6000), rng.uniform(0, 20, 6000), np.zeros(6000)])
+    roof[:, 2] = 0.3 * roof[:, 0] + rng.normal(0, 0.02, 6000)
+    crown = rng.normal([40, 10, 5], 1.5, (1500, 3))
+    sparse_roof = np.column_stack([rng.uniform(60, 80, 300), rng.uniform(0, 20, 300), rng.normal(0, 0.02, 300)])
+    t = np.linspace(0, 30, 200)
+    wire = np.column_stack([t, 25 + 0 * t, 8 + 0.001 * (t - 15) ** 2])
+    xyz = np.vstack([roof, crown, sparse_roof, wire])
+    _, plain_planar, plain_rugged = shape_classes(xyz)
+    _, planar, rugged = shape_classes(xyz, surface_density=density)
+    counts = cKDTree(xyz).query_ball_point(xyz, 1.0, return_length=True)
+    dense = counts >= 0.5 * np.pi * density
+    assert np.array_equal(planar, plain_planar & dense) and np.array_equal(rugged, plain_rugged & dense)
+    assert planar.any() and (plain_planar & ~dense).any()  # both outcomes occur
 
 
 @pytest.mark.parametrize("seed", range(5))
