@@ -298,7 +298,7 @@ class _OutputWriter:
             try:
                 fut.set_result(write_output(self.kinds[name], value, self.paths[name], self.style_dirs,
                                             self.overwrite))
-            except BaseException as exc:  # noqa: BLE001 - reported below with the others
+            except Exception as exc:  # noqa: BLE001 - reported below with the others (Ctrl-C stops at once)
                 fut.set_exception(exc)
             self.futures[name] = fut
         self.held.clear()
