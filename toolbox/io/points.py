@@ -568,9 +568,8 @@ LAZ_CHUNK_POINTS = 50_000  # laspy's LAZ chunk size: the unit of parallel compre
 
 def _laz_backend(n_points: int | None = None):
     """lazrs, compressing chunks on all cores when the parallel build is there and the cloud has
-    more than one chunk (a single chunk gains nothing from the thread pool, whose idle threads
-    take CPU from the DTM computed meanwhile; on AHN3's 43 k points the gain is within the noise:
-    medians of 15 runs 54-55 ms against 54-68)."""
+    more than one chunk (a single chunk gains nothing from handing it to a thread pool; on AHN3's
+    43 k points the serial backend's medians of 15 runs were 54-55 ms against 54-68)."""
     import laspy
 
     if n_points is not None and n_points <= LAZ_CHUNK_POINTS:
