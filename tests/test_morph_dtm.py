@@ -327,6 +327,31 @@ def test_batch_of_tiles_in_parallel(terrain_scene, tmp_path, cli):
     assert sorted(p.name for p in out.glob("*.laz")) == ["tile0_classified.laz", "tile1_classified.laz", "tile2_classified.laz"]
 
 
+def test_a_fresh_process_takes_the_kernels_only_once_numpy_would_have_paid_for_their_start_up(monkeypatch):
+    from toolbox_plugins.morph_dtm import plugin as P
+
+    monkeypatch.setattr(P, "_numpy_extra_s", [0.0])
+    per_point = P.NUMPY_EXTRA_S_PER_POINT
+    cold = P.KERNELS_FIRST_USE_S + P.TAICHI_START_S
+    small = int(0.4 * cold / per_point)  # one such cloud costs 40 % of the start-up in numpy
+    assert small >= P.KERNEL_MIN_POINTS
+    fresh = dict(kernels_used=False, taichi_started=False, requested=False)
+    assert not P.use_kernels(small, **fresh)  # 40 % lost
+    assert not P.use_kernels(small, **fresh)  # 80 %
+    assert P.use_kernels(small, **fresh)  # the third would pass the start-up: buy
+    monkeypatch.setattr(P, "_numpy_extra_s", [0.0])
+    assert P.use_kernels(int(1.01 * cold / per_point), **fresh)  # a large tile at once
+    # taichi already running (another algorithm started it): only the kernels' front end is left
+    assert P.use_kernels(int(1.01 * P.KERNELS_FIRST_USE_S / per_point), False, True, False)
+    assert not P.use_kernels(int(1.01 * P.KERNELS_FIRST_USE_S / per_point), False, False, False)
+    # kernels already built, or asked for by name (--arch cuda): from the size where they win
+    monkeypatch.setattr(P, "_numpy_extra_s", [0.0])
+    assert P.use_kernels(P.KERNEL_MIN_POINTS, True, False, False)
+    assert P.use_kernels(P.KERNEL_MIN_POINTS, False, False, True)
+    assert not P.use_kernels(P.KERNEL_MIN_POINTS - 1, True, True, True)
+    assert P._numpy_extra_s == [0.0]  # clouds numpy takes anyway count no loss
+
+
 def test_dtm_kernels_match_their_numpy_references():
     from toolbox import kernels
     from toolbox_plugins.morph_dtm.kernels import TaichiAccel

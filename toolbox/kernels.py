@@ -34,6 +34,11 @@ def set_arch(arch: str | None) -> None:
     _arch_requested = arch
 
 
+def started() -> bool:
+    """Whether ``taichi()`` has run in this process (without starting it)."""
+    return _ti is not None
+
+
 def requested_arch() -> str:
     arch = _arch_requested or os.environ.get("TOOLBOX_ARCH", "auto").lower()
     if arch not in ARCHES:

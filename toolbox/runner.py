@@ -61,6 +61,17 @@ class Context:
         """The taichi module, initialised once (CUDA when present, else CPU, or as --arch says)."""
         return kernels.taichi()
 
+    def taichi_started(self) -> bool:
+        """Whether taichi already runs in this process. Starting it costs about 0.5 s, and each
+        kernel's first call in a process another 0.05-0.2 s (taichi's Python front end runs even
+        when its offline cache holds the machine code): a plugin may prefer numpy for work that
+        small in a fresh process."""
+        return kernels.started()
+
+    def taichi_requested(self) -> bool:
+        """Whether the user asked for an accelerator by name (``--arch cuda``, ``TOOLBOX_ARCH``)."""
+        return kernels.requested_arch() in ("cuda", "vulkan")
+
     def emit(self, output_name: str, value: Any) -> None:
         """Hand over a finished output early. A raster, image or vector is then written in the
         background, beside the remaining computation (GDAL releases the GIL); a point cloud is

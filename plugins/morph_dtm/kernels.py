@@ -124,6 +124,11 @@ def _build(ti):
     return moments, moments_sliced, cell_min, near_surface
 
 
+def used() -> bool:
+    """Whether this process has made a :class:`TaichiAccel` (its kernels' start-up is paid)."""
+    return _k is not None
+
+
 class TaichiAccel:
     """The ``accel`` argument of ``core.ground_filter`` / ``core.dtm_from_ground``."""
 

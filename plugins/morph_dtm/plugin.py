@@ -98,16 +98,45 @@ def _footprint(grid, x, y, radius_cells):
     return footprint(occ.reshape(grid.rows, grid.cols), radius_cells)
 
 
-KERNEL_MIN_POINTS = 300_000  # below this, compiling the kernels costs more than they save
+KERNEL_MIN_POINTS = 300_000  # below this the numpy passes are as fast as the kernels
+# The kernels' first use in a process costs start-up: taichi's own start (about 0.5 s, unless
+# another algorithm started it) and its Python front end on the three kernels (about 0.35 s,
+# paid even when the offline cache holds their machine code). The numpy passes cost more per
+# point: 0.17 s per million in a warm process (AHN4's 0.7 M points +0.12 s, the 1.9 M corridor
+# +0.28 s, the 10 M tile +2.0 s), about 0.5 s per million in a fresh one (their temporaries are
+# paid in page faults as well: a fresh `toolbox run dtm` on the 1.9 M corridor was 0.2 s slower
+# with numpy, on AHN4's 0.77 M 0.55 s faster). So a process takes numpy until the time numpy
+# has lost would have paid for the start-up (rent or buy), counted at the fresh-process rate:
+# a single file under about 1.7 M points never starts taichi for the DTM, a batch worker starts
+# it after a few files, a larger tile at once.
+NUMPY_EXTRA_S_PER_POINT = 0.5e-6
+KERNELS_FIRST_USE_S = 0.35
+TAICHI_START_S = 0.5
+_numpy_extra_s = [0.0]  # what this process's numpy passes are estimated to have lost so far
+
+
+def use_kernels(n_points: int, kernels_used: bool, taichi_started: bool, requested: bool) -> bool:
+    """The rule above; counts the loss when it answers numpy for a cloud the kernels would take."""
+    if n_points < KERNEL_MIN_POINTS:
+        return False
+    if kernels_used or requested:
+        return True
+    start_up = KERNELS_FIRST_USE_S + (0.0 if taichi_started else TAICHI_START_S)
+    extra = NUMPY_EXTRA_S_PER_POINT * n_points
+    if _numpy_extra_s[0] + extra >= start_up:
+        return True
+    _numpy_extra_s[0] += extra
+    return False
 
 
 def _accel(ctx, n_points: int):
-    """Parallel taichi kernels for the per-point passes of large clouds; numpy for small ones."""
-    if n_points < KERNEL_MIN_POINTS:
-        return None
-    from .kernels import TaichiAccel
+    """Parallel taichi kernels for the per-point passes of large clouds, numpy for small ones
+    (and in a fresh process, while the kernels' start-up would cost more than they save)."""
+    from . import kernels
 
-    return TaichiAccel(ctx.taichi())
+    if not use_kernels(n_points, kernels.used(), ctx.taichi_started(), ctx.taichi_requested()):
+        return None
+    return kernels.TaichiAccel(ctx.taichi())
 
 
 def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
