@@ -199,7 +199,38 @@ def bench_ground(tmp: Path, with_10m: bool, quick: bool) -> list[dict]:
     real = [c for c in cases if c[0] == "AHN4 corridor"]  # a real tile under the kernels' cold threshold
     if real:
         rows.append(bench_cold_cli(tmp, real[0][1], real[0][0]))
+    small = [c for c in cases if c[0] == "AHN3 Amsterdam"]
+    if small and not quick:
+        rows.append(bench_cold_batch(tmp, small[0][1], small[0][0], copies=100))
     return rows
+
+
+def bench_cold_batch(tmp: Path, path: Path, label: str, copies: int) -> dict:
+    """A folder of small tiles through the command line (fresh processes, every core): how the
+    per-file fixed costs of a small tile spread over a survey delivered as many such tiles."""
+    import os
+    import shutil
+    import subprocess
+
+    src, dst = tmp / "batch_in", tmp / "batch_out"
+    for d in (src, dst):
+        shutil.rmtree(d, ignore_errors=True)
+        d.mkdir()
+    for i in range(copies):
+        try:
+            os.symlink(path, src / f"tile{i:03d}.laz")
+        except OSError:
+            shutil.copy(path, src / f"tile{i:03d}.laz")
+    exe = Path(sys.executable).with_name("toolbox")
+    t, r = timed(lambda: subprocess.run([str(exe), "run", "dtm", str(src), "-o", str(dst), "--overwrite", "-q"],
+                                        capture_output=True, text=True))
+    if r.returncode != 0:
+        print(f"  batch CLI run failed: {r.stderr.strip()[-300:]}")
+    n = laspy.open(path).header.point_count * copies
+    row = {"case": f"dtm CLI batch, fresh: {copies} x {label}", "points": n, "ours_s": t, "whitebox_s": None,
+           "csf_s": None}
+    print_row(row)
+    return row
 
 
 def bench_hillshade(tmp: Path) -> list[dict]:
