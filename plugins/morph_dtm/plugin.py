@@ -249,7 +249,8 @@ def _run_classify(inputs, params, ctx):
         xyz, h[rest] * vu / hu, neighbours=params["neighbours"], max_plane_error=params["max_plane_error_m"] / hu,
         min_plane_error=params["min_plane_error_m"] / hu, min_building_points=params["min_building_points"],
         min_building_height=params["min_building_height_m"] / hu, link_distance=params["link_distance_m"] / hu,
-        vegetation_link=params["link_distance_m"] / hu)
+        vegetation_link=params["link_distance_m"] / hu, wall_reach=params["wall_reach_m"] / hu,
+        wall_above=0.5 / hu)
     below = rest & (h < -params["low_outlier_m"] / vu)
     cls[noise | below] = 7
     u, c = np.unique(cls, return_counts=True)
@@ -330,6 +331,9 @@ def toolbox_algorithms():
                           unit="m", minimum=0.0, maximum=500.0),
                 Parameter("link_distance_m", float, 1.5, "points closer than this belong to one set",
                           unit="m", minimum=0.01, maximum=50.0),
+                Parameter("wall_reach_m", float, 1.0, "points under a roof edge, within this distance in plan "
+                          "of a roof point and at most 0.5 m over it, are its facade (walls, balconies, "
+                          "eaves); 0 keeps the method's plane rule alone", unit="m", minimum=0.0, maximum=10.0),
             ],
             inputs=[Input("points", "points", "LAS/LAZ point cloud")],
             outputs=[
