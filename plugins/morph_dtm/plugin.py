@@ -311,7 +311,8 @@ def toolbox_algorithms():
             id="classify", title="Ground, buildings, vegetation (low/medium/high), noise", run=_run_classify,
             description=(
                 "Among the non-ground points, local least-squares planes separate buildings (small plane error, "
-                "large connected planar sets) from vegetation; vegetation clusters are classed low (< 2 m), "
+                "large connected planar sets) from vegetation, and the points under a roof edge (facades, "
+                "balconies, eaves) join their building; vegetation clusters are classed low (< 2 m), "
                 "medium (< 5 m) or high by their height above the terrain; points below the terrain are noise. "
                 "ASPRS classes 1, 2, 3, 4, 5, 6, 7."),
             reference=REFERENCE,
