@@ -261,6 +261,21 @@ def _box_building_with_facades_and_a_tree(rng):
     return xyz, xyz[:, 2].copy(), np.concatenate(truth)
 
 
+def test_a_bundle_of_parallel_wires_is_no_roof():
+    from toolbox_plugins.morph_dtm.objects import classify_objects
+
+    rng = np.random.default_rng(5)
+    gx, gy = np.meshgrid(np.arange(0, 10, 0.3), np.arange(0, 6, 0.3))  # a 10 x 6 m roof, 7 m up
+    roof = np.column_stack([gx.ravel(), gy.ravel(), 7.0 + rng.normal(0, 0.02, gx.size)])
+    s = np.arange(0, 60, 0.25)  # two conductors 0.45 m apart at 12 m, 30 m from the roof: a flat strip
+    wires = np.vstack([np.column_stack([s, np.full_like(s, 40.0 + dy), 12.0 + 0.002 * (s - 30) ** 2])
+                       for dy in (0.0, 0.45)])
+    xyz = np.vstack([roof, wires])
+    cls = classify_objects(xyz, xyz[:, 2].copy())
+    assert (cls[:len(roof)] == 6).mean() >= 0.98
+    assert not np.any(cls[len(roof):] == 6)  # planar-looking, but 0.45 m wide and 60 m long
+
+
 def test_facades_under_a_roof_edge_join_their_building_and_a_tree_beside_it_does_not():
     from toolbox_plugins.morph_dtm.objects import classify_objects
 

@@ -6,7 +6,9 @@
   trivially, so planarity also asks for a two-dimensional spread.
 * Planar points grouped by proximity; groups of at least ``min_building_points`` points standing
   at least ``min_building_height`` above the terrain, holding most (``min_planar_share``) of the
-  raised points in the cells they cover, are buildings. Non-planar points between
+  raised points in the cells they cover, are buildings; a planar set under 1.5 m wide and over
+  ten times as long is a bundle of conductors (two or three wires side by side fit planes too:
+  990 of real AHN4's class-14 wire points were called building) and stays unclassified. Non-planar points between
   them (ridges, eaves, chimneys) join a building when most of their neighbours are building.
 * Beyond the method: points under a building's roof edge (within ``wall_reach`` in plan of a
   roof point, and not more than ``wall_above`` over it) are its facade, balconies and eaves.
@@ -60,6 +62,30 @@ def _components(xyz: np.ndarray, radius: float):
     return connected_components(g, directed=False)[1]
 
 
+def _narrow_long_sets(xyz: np.ndarray, lab: np.ndarray, counts: np.ndarray, candidate: np.ndarray,
+                      max_width: float = 1.5, max_width_to_length: float = 0.1) -> np.ndarray:
+    """Per component: its plan extent (the sides of the uniform rectangle with the same second
+    moments) is under ``max_width`` wide and ``max_width_to_length`` of its length. Only the
+    components flagged in ``candidate`` (per point) are measured."""
+    n_comp = len(counts)
+    out = np.zeros(n_comp, bool)
+    which = np.unique(lab[candidate])
+    if not len(which):
+        return out
+    xy = xyz[:, :2] - xyz[:, :2].mean(axis=0)
+    w = np.maximum(counts, 1)
+    mx, my = (np.bincount(lab, weights=xy[:, i], minlength=n_comp) / w for i in (0, 1))
+    sxx = np.bincount(lab, weights=xy[:, 0] ** 2, minlength=n_comp) / w - mx * mx
+    syy = np.bincount(lab, weights=xy[:, 1] ** 2, minlength=n_comp) / w - my * my
+    sxy = np.bincount(lab, weights=xy[:, 0] * xy[:, 1], minlength=n_comp) / w - mx * my
+    half_tr, det = 0.5 * (sxx + syy), sxx * syy - sxy * sxy
+    root = np.sqrt(np.maximum(half_tr * half_tr - det, 0.0))
+    width = np.sqrt(12.0 * np.maximum(half_tr - root, 0.0))
+    length = np.sqrt(12.0 * np.maximum(half_tr + root, 0.0))
+    out[which] = (width[which] < max_width) & (width[which] < max_width_to_length * length[which])
+    return out
+
+
 def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 12, max_plane_error: float = 0.08,
                      min_plane_error: float = 0.12, min_building_points: int = 60, min_building_height: float = 2.0,
                      link_distance: float = 1.5, vegetation_link: float = 1.5, low_max: float = 2.0,
@@ -80,6 +106,7 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
         err, spread, idx, _ = local_planes(pts, neighbours)
         planar = (err <= max_plane_error) & (spread >= 0.05)
         building = np.zeros(len(pts), bool)
+        line_set = np.zeros(len(pts), bool)
         if planar.any():
             p_idx = np.flatnonzero(planar)
             lab = _components(pts[p_idx], link_distance)
@@ -100,6 +127,11 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
             share = np.bincount(comp_of, weights=share_cells * ccount, minlength=len(counts)) / np.maximum(counts, 1)
             ok = (counts[lab] >= min_building_points) & (hmax[lab] >= min_building_height) & \
                 (share[lab] >= min_planar_share)
+            # two or three wires side by side fit planes too: a planar set under 1.5 m wide and
+            # over ten times as long is a bundle of conductors, not a roof (left unclassified)
+            wires = _narrow_long_sets(pts[p_idx], lab, counts, ok)
+            ok &= ~wires[lab]
+            line_set[p_idx[wires[lab]]] = True
             building[p_idx[ok]] = True
             # ridges, eaves, small roof structures: most neighbours are building
             for _ in range(grow_steps):
@@ -118,7 +150,7 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
                 building[r_i[near]] = True
         cls_above[building] = BUILDING
         rough = (err >= min_plane_error) | ~planar
-        rest = ~building
+        rest = ~building & ~line_set
         if rest.any():
             # clusters of the remaining points; a cluster with a fair share of rough (non-planar)
             # points is a plant, all of it, classed by its top; others stay unknown (1)
