@@ -267,7 +267,7 @@ def test_a_bundle_of_parallel_wires_is_no_roof():
     rng = np.random.default_rng(5)
     gx, gy = np.meshgrid(np.arange(0, 10, 0.3), np.arange(0, 6, 0.3))  # a 10 x 6 m roof, 7 m up
     roof = np.column_stack([gx.ravel(), gy.ravel(), 7.0 + rng.normal(0, 0.02, gx.size)])
-    s = np.arange(0, 60, 0.25)  # two conductors 0.45 m apart at 12 m, 30 m from the roof: a flat strip
+    s = np.arange(0, 60, 0.25)  # two conductors 0.45 m apart at 12 m, 34 m from the roof: a flat strip
     wires = np.vstack([np.column_stack([s, np.full_like(s, 40.0 + dy), 12.0 + 0.002 * (s - 30) ** 2])
                        for dy in (0.0, 0.45)])
     xyz = np.vstack([roof, wires])
