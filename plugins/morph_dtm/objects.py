@@ -6,9 +6,10 @@
   trivially, so planarity also asks for a two-dimensional spread.
 * Planar points grouped by proximity; groups of at least ``min_building_points`` points standing
   at least ``min_building_height`` above the terrain, holding most (``min_planar_share``) of the
-  raised points in the cells they cover, are buildings; a planar set under 1.5 m wide and over
-  ten times as long is a bundle of conductors (two or three wires side by side fit planes too:
-  990 of real AHN4's class-14 wire points were called building) and stays unclassified.
+  raised points in the cells they cover, are buildings; a planar set under ``max_bundle_width``
+  (1.5 m) wide and over ten times as long is a bundle of conductors (two or three wires side by
+  side fit planes too: 990 of real AHN4's class-14 wire points were called building) and stays
+  unclassified.
   Non-planar points between them (ridges, eaves, chimneys) join a building when most of their
   neighbours are building.
 * Beyond the method: points under a building's roof edge (within ``wall_reach`` in plan of a
@@ -92,7 +93,7 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
                      link_distance: float = 1.5, vegetation_link: float = 1.5, low_max: float = 2.0,
                      medium_max: float = 5.0, min_object_height: float = 0.25,
                      min_planar_share: float = 0.6, grow_steps: int = 8, wall_reach: float = 1.0,
-                     wall_above: float = 0.5) -> np.ndarray:
+                     wall_above: float = 0.5, max_bundle_width: float = 1.5) -> np.ndarray:
     """ASPRS classes (1, 3, 4, 5, 6) for non-ground points ``xyz`` with heights above the terrain
     ``height`` (same units). Lengths are in the cloud's units."""
     n = len(xyz)
@@ -130,7 +131,7 @@ def classify_objects(xyz: np.ndarray, height: np.ndarray, *, neighbours: int = 1
                 (share[lab] >= min_planar_share)
             # two or three wires side by side fit planes too: a planar set under 1.5 m wide and
             # over ten times as long is a bundle of conductors, not a roof (left unclassified)
-            wires = _narrow_long_sets(pts[p_idx], lab, counts, ok)
+            wires = _narrow_long_sets(pts[p_idx], lab, counts, ok, max_width=max_bundle_width)
             ok &= ~wires[lab]
             line_set[p_idx[wires[lab]]] = True
             building[p_idx[ok]] = True
