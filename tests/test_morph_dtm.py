@@ -289,6 +289,30 @@ def test_facades_under_a_roof_edge_join_their_building_and_a_tree_beside_it_does
     assert np.isin(with_rule[truth == 5], [3, 4, 5]).mean() >= 0.98  # the crown stays a tree
 
 
+def test_classify_gives_the_same_classes_to_a_survey_in_feet(terrain_scene, tmp_path):
+    from pyproj import CRS
+
+    from toolbox.io.points import PointCloud, write_points
+
+    ft = 0.3048
+    pc = read_points(terrain_scene)
+    fields = {k: np.asarray(pc.fields[k]) for k in ("classification", "return_number", "number_of_returns")}
+    pc_ft = PointCloud(pc.x / ft, pc.y / ft, pc.z / ft, fields,
+                       crs=CRS.from_epsg(2992))  # NAD83 / Oregon GIC Lambert, international feet
+    write_points(pc_ft, tmp_path / "feet.laz")
+    assert read_points(tmp_path / "feet.laz").horizontal_unit_m == pytest.approx(ft)
+    toolbox.run("classify", terrain_scene, tmp_path / "m.laz")
+    toolbox.run("classify", tmp_path / "feet.laz", tmp_path / "f.laz")
+    in_m = laspy.read(tmp_path / "m.laz").classification
+    in_ft = laspy.read(tmp_path / "f.laz").classification
+    obj = np.isin(in_m, [3, 4, 5, 6])
+    # every length and height of the rules is in metres whatever the file's unit (vegetation
+    # classes at 2 and 5 m, not 2 and 5 feet): only the files' 1 mm / 1 mft rounding differs
+    # (measured 0.99998; 0.968 with the height classes taken in feet)
+    assert (in_m[obj] == in_ft[obj]).mean() >= 0.999
+    assert (in_m == in_ft).mean() >= 0.999
+
+
 def test_feet_input_gives_dtm_in_feet(tmp_path):
     path = shared_file("pdal_autzen/autzen_trim.las")
     toolbox.run("dtm", path, tmp_path / "a.tif", resolution_m=1.0)

@@ -250,7 +250,8 @@ def _run_classify(inputs, params, ctx):
         min_plane_error=params["min_plane_error_m"] / hu, min_building_points=params["min_building_points"],
         min_building_height=params["min_building_height_m"] / hu, link_distance=params["link_distance_m"] / hu,
         vegetation_link=params["link_distance_m"] / hu, wall_reach=params["wall_reach_m"] / hu,
-        wall_above=0.5 / hu, max_bundle_width=1.5 / hu)
+        wall_above=0.5 / hu, max_bundle_width=1.5 / hu,
+        low_max=2.0 / hu, medium_max=5.0 / hu, min_object_height=0.25 / hu)  # ASPRS height classes in metres
     below = rest & (h < -params["low_outlier_m"] / vu)
     cls[noise | below] = 7
     u, c = np.unique(cls, return_counts=True)
