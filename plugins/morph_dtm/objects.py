@@ -29,6 +29,8 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from toolbox.neighbourhoods import neighbourhood_covariances, symmetric3_eigenvalues
+
 GROUND, UNCLASSIFIED, LOW, MEDIUM, HIGH, BUILDING, NOISE = 2, 1, 3, 4, 5, 6, 7
 
 
@@ -39,10 +41,9 @@ def local_planes(xyz: np.ndarray, neighbours: int):
     k = int(min(neighbours, len(xyz)))
     _, idx = tree.query(xyz, k=k, workers=-1)
     idx = idx.reshape(len(xyz), k)
-    nb = xyz[idx]
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centred, centred) / k
-    ev = np.linalg.eigvalsh(cov)  # ascending
+    # closed-form eigenvalues of chunked covariances: a third of the time of eigvalsh on a
+    # gathered (n, k, 3) array (198 k object points of the corridor: 1.15-1.36 -> 0.43-0.51 s)
+    ev = symmetric3_eigenvalues(neighbourhood_covariances(xyz, idx))  # ascending
     plane_error = np.sqrt(np.maximum(ev[:, 0], 0))
     total = ev.sum(axis=1) + 1e-12
     spread2d = ev[:, 1] / total  # ~0 for a line, up to 0.5 for a flat patch
