@@ -474,7 +474,7 @@ def test_default_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, caplo
 
 
 def test_closed_form_eigen_matches_numpy():
-    from toolbox_plugins.powerlines.core import principal_axes, symmetric3_eigenvalues
+    from toolbox.neighbourhoods import principal_axes, symmetric3_eigenvalues
 
     rng = np.random.default_rng(5)
     pts = rng.normal(size=(2000, 12, 3)) * rng.uniform(0.01, 3, size=(2000, 1, 3))
@@ -499,7 +499,7 @@ def test_neighbourhood_covariances_equal_centred_products():
     from its origin (offsets from each point keep E[ab] - E[a]E[b] exact)."""
     from scipy.spatial import cKDTree
 
-    from toolbox_plugins.powerlines.core import neighbourhood_covariances
+    from toolbox.neighbourhoods import neighbourhood_covariances
 
     rng = np.random.default_rng(9)
     xyz = rng.uniform(0, 40, (3000, 3)) * [1, 1, 0.3] + 300.0
