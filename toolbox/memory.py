@@ -4,8 +4,9 @@ numpy takes every temporary array of more than 128 KiB from glibc's ``malloc``, 
 maps such blocks fresh from the kernel and unmaps them on ``free`` (or trims the heap top back to
 the kernel). Each new block is then paid again in page faults: on the 2-core CI machine computing
 the cell index of 43 000 points took 0.70 ms instead of 0.17, and a 700 000-point power-line run
-took 0.72-0.78 s instead of 0.61-0.73 s (best of 4, processes alternated). Keeping blocks up to 32 MiB on the heap and the
-heap's free top up to 256 MiB lets the arrays of one run reuse the memory of the last.
+took 0.72-0.78 s instead of 0.61-0.73 s (best of 4, processes alternated). Keeping blocks up to
+32 MiB on the heap and the heap's free top up to 256 MiB lets the arrays of one run reuse the
+memory of the last.
 
 Set once per process, on the first run. ``TOOLBOX_MALLOC_TUNE=0`` leaves the allocator alone; so
 does any ``MALLOC_*_`` or ``GLIBC_TUNABLES=glibc.malloc.*`` setting already in the environment

@@ -22,12 +22,12 @@ Why it is written this way (each measured on the 2-core CI machine, 20 000 point
   (no remainder loop), the band-subtraction flags are always computed (no second variant: the
   compare costs nothing measurable beside the scattered increments) and small steps are merged;
 - handing a loop to taichi's CPU thread pool costs 0.15-0.25 ms with the launch (even an empty
-  loop), about what subtracting a band of 300 points costs. So the band's subtraction only flags the rows whose
-  peak cell lost votes, and the peak search is one *serial* kernel: it rescans dirty rows only
-  while their old maximum (an upper bound) could still win, the highest bound first. Before, a
-  parallel rescan kernel ran 1-3 times per peak (0.9 ms per peak on AHN4; now 0.3-0.5 ms). Rescanning
-  hit rows eagerly inside the vote kernel was tried: more rows scanned, 2x slower per band. Tiny
-  loops (copying a band's few hundred points) run in the launching thread.
+  loop), about what subtracting a band of 300 points costs. So the band's subtraction only flags
+  the rows whose peak cell lost votes, and the peak search is one *serial* kernel: it rescans
+  dirty rows only while their old maximum (an upper bound) could still win, the highest bound
+  first. Before, a parallel rescan kernel ran 1-3 times per peak (0.9 ms per peak on AHN4; now
+  0.3-0.5 ms). Rescanning hit rows eagerly inside the vote kernel was tried: more rows scanned,
+  2x slower per band. Tiny loops (copying a band's few hundred points) run in the launching thread.
 - a band's subtraction skips the θ blocks whose rows are all bounded below the caller's vote
   threshold (most rows, once a tile's first peak is known): those rows can no longer win, and
   each subtraction otherwise streamed the whole accumulator through memory (AHN4 85 -> 45 ms).
@@ -43,7 +43,9 @@ TASK_STRIDE = 512
 POINTS_PER_PASS = 1 << 20  # points are voted in passes of at most this many
 MAX_THETAS = 1 << 15  # 0.0055° steps at the finest
 UNBOUNDED = 2**31 - 1  # the bound of a row whose counts grew
-CELLS = 1 << 23  # accumulator cells of the standard kit (32 MiB: a default 110 m tile needs 4.8 M); larger ones get their own
+# accumulator cells of the standard kit (32 MiB: a default 110 m tile needs 4.8 M); larger
+# accumulators get a kit of their own
+CELLS = 1 << 23
 
 _kits: dict = {}
 _busy = [False]
@@ -228,7 +230,8 @@ class TaichiAccumulator:
         """See :meth:`reference.NumpyAccumulator.vote`. A subtraction leaves the rows bounded
         below ``floor`` as they are (whole θ blocks of them): most rows of a tile are, once its
         first peak is known, and each subtraction otherwise streams the whole accumulator
-        through memory (AHN4: 60 band subtractions 85 -> 45 ms; the whole Hough stage 145-190 -> 127-168 ms)."""
+        through memory (AHN4: 60 band subtractions 85 -> 45 ms; the whole Hough stage 145-190 ->
+        127-168 ms)."""
         x = np.asarray(x, np.float32)
         y = np.asarray(y, np.float32)
         floor = int(floor) if sign < 0 else 0

@@ -149,16 +149,13 @@ class TaichiAccel:
         cells = grid.rows * grid.cols
         # one slice per thread while the copies stay small and each slice has points to sum
         slices = max(min(self._threads, SLICE_GRID_BYTES // (cells * len(MOMENTS) * 8), len(x) // 10_000), 1)
-        if self._threads:
+        out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
+        if len(x) and self._threads:
             part = np.zeros((slices, cells, len(MOMENTS)), np.float64)
-            out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
-            if len(x):
-                self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, mask, masked,
-                                     part, out.reshape(len(MOMENTS), cells))
-        else:  # a GPU: one shared grid, atomic adds
-            out = np.zeros((len(MOMENTS), grid.rows, grid.cols), np.float64)
-            if len(x):
-                self._moments(x, y, z, grid.west, grid.north, grid.cell, mask, masked, out)
+            self._moments_sliced(x, y, z, grid.west, grid.north, grid.cell, grid.rows, grid.cols, mask, masked,
+                                 part, out.reshape(len(MOMENTS), cells))
+        elif len(x):  # a GPU: one shared grid, atomic adds
+            self._moments(x, y, z, grid.west, grid.north, grid.cell, mask, masked, out)
         return {name: out[k] for k, name in enumerate(MOMENTS)}
 
     def minimum_surface(self, grid, x, y, z):
