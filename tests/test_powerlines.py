@@ -130,7 +130,7 @@ def test_detection_loop_takes_the_numpy_peaks(seed):
         ys.append(b + t * np.sin(np.radians(ang)) + rng.normal(0, 0.05, 250))
     x, y = np.concatenate(xs), np.concatenate(ys)
     ref = hough.detect_lines(x, y, reference.NumpyAccumulator, min_votes=8)
-    got = hough.detect_lines(x, y, lambda *a: hough_kernels.TaichiAccumulator(kernels.taichi(), *a), min_votes=8)
+    got = hough.detect_lines(x, y, lambda *a, **kw: hough_kernels.TaichiAccumulator(kernels.taichi(), *a, **kw), min_votes=8)
     assert len(ref) >= 4
     assert [(L.theta_deg, L.rho, L.votes) for L in got] == [(L.theta_deg, L.rho, L.votes) for L in ref]
 
@@ -603,6 +603,48 @@ def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():
         a.vote(x2, y2, 1)
         b.vote(x2, y2, 1)
         assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()
+
+
+@pytest.mark.parametrize("x0, y0, w, h", [(0, 0, 110, 110), (0, 0, 110, 12), (37, 0, 20, 110), (-55, -55, 110, 110)])
+def test_an_accumulator_given_its_extent_counts_and_peaks_as_numpy(x0, y0, w, h):
+    """With the points' bounding box, the kernel clears and scans each θ row only over the ρ bins
+    the box reaches; the rest must read as zeros, whatever a previous accumulator left there,
+    and every count and peak equals numpy's."""
+    rng = np.random.default_rng(11)
+    x, y = x0 + rng.uniform(0, w, 3000), y0 + rng.uniform(0, h, 3000)
+    t = rng.uniform(0, 1, 400)  # a line across the box, so that peaks are well above the scatter
+    x, y = np.r_[x, x0 + w * t], np.r_[y, y0 + h * (0.2 + 0.6 * t)]
+    thetas, k_min, rows = hough.accumulator_shape(x, y, 0.1, 0.1)
+    c, s = np.cos(thetas), np.sin(thetas)
+    # a previous accumulator of the same shape fills whole rows with counts
+    extent = (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
+    lo, hi = hough_kernels.reach(*reference.bin_scales(c, s, k_min, 10.0), rows, extent)
+    cols = np.arange(rows)[None, :]
+    outside = (cols < lo[:len(thetas), None]) | (cols > hi[:len(thetas), None])
+    # (points within the disc every θ row holds: any ρ in [-radius, radius])
+    radius = min(-k_min, k_min + rows - 1) * 0.1 - 0.5
+    ang, rad = rng.uniform(-np.pi, np.pi, 20000), radius * np.sqrt(rng.uniform(0, 1, 20000))
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as old:
+        old.vote(rad * np.cos(ang), rad * np.sin(ang), 1)
+        assert (old.to_numpy()[outside] > 0).sum() > 1000  # left where the next one won't clear
+    a = reference.NumpyAccumulator(c, s, k_min, 10.0, rows, extent=extent)
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows, extent=extent) as b:
+        assert not b.to_numpy().any() and b.peak()[2] == 0
+        a.vote(x, y, 1)
+        b.vote(x, y, 1)
+        ref = a.to_numpy()
+        assert np.array_equal(ref, b.to_numpy()) and a.peak() == b.peak()
+        assert not ref[outside].any()  # every vote lies within its row's reach
+        left = np.arange(len(x))
+        for _ in range(4):  # the detection loop
+            cc, r, _ = a.peak()
+            near = left[np.abs(reference.bin_index(x[left], y[left], a.cs[cc], a.ss[cc], a.off) - r) <= 4]
+            a.vote(x[near], y[near], -1)
+            b.vote(x[near], y[near], -1)
+            left = np.setdiff1d(left, near)
+            assert a.peak() == b.peak()
+        with pytest.raises(ValueError, match="outside the accumulator's extent"):
+            b.vote(np.array([extent[1] + 1.0]), np.array([extent[2]]), 1)
 
 
 def test_an_accumulator_larger_than_the_standard_kit_counts_the_same():

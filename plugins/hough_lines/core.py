@@ -115,8 +115,9 @@ def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step
                  max_accumulator_bytes: int = 2 << 30, fit_points: str = "band") -> list[HoughLine]:
     """Lines in points (x, y) of one tile, already shifted to a local origin (numerical range).
 
-    ``new_accumulator(cos_t, sin_t, k_min, inv_drho, n_rho)`` makes the accumulator (see
-    ``reference.NumpyAccumulator`` for its methods).
+    ``new_accumulator(cos_t, sin_t, k_min, inv_drho, n_rho, extent=(x_lo, x_hi, y_lo, y_hi))``
+    makes the accumulator (see ``reference.NumpyAccumulator`` for its methods); ``extent`` is
+    the box of the points, the only ones voted.
     ``fit_points``: "inverse" refits each line on its inverse-Hough points (the paper's choice,
     quantised to the ρ bin), "band" on the points within ±band_m (sharper).
     """
@@ -132,7 +133,8 @@ def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step
             f"(limit {max_accumulator_bytes / 2**30:.1f} GiB)")
     cos_t, sin_t = np.cos(thetas), np.sin(thetas)
     inv = 1.0 / rho_step_m
-    with new_accumulator(cos_t, sin_t, k_min, inv, rows) as acc:
+    with new_accumulator(cos_t, sin_t, k_min, inv, rows,
+                         extent=(float(x.min()), float(x.max()), float(y.min()), float(y.max()))) as acc:
         acc.vote(x, y, 1)
         return _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, band_m=band_m, min_votes=min_votes, s_min_m=s_min_m, v_max_m=v_max_m,
                               max_lines=max_lines, fit_points=fit_points)

@@ -36,7 +36,9 @@ class NumpyAccumulator:
     """The (θ, ρ) accumulator as a numpy int32 array: a row per θ, a column per ρ bin (the
     method's H transposed, so that each θ's votes are contiguous)."""
 
-    def __init__(self, cos_t, sin_t, k_min: int, inv_drho: float, n_rho: int):
+    def __init__(self, cos_t, sin_t, k_min: int, inv_drho: float, n_rho: int, extent=None):
+        # ``extent``: the box (x_lo, x_hi, y_lo, y_hi) all votes will come from; a kernel may use
+        # it to skip what no vote can reach; counts here are exact without it
         self.cs, self.ss, self.off = bin_scales(cos_t, sin_t, k_min, inv_drho)
         self.acc = np.zeros((len(self.cs), int(n_rho)), np.int32)
 
