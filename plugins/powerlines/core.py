@@ -149,19 +149,34 @@ def fit_catenary(s, z):
         c0, s00, z00 = 50.0 * span, float(s[np.argmin(z)]), float(z.min())
     c0 = float(np.clip(c0, 1.0, 1e7))
 
-    # MINPACK asks for the Jacobian at the point whose residuals it has just had: the residuals,
-    # u and cosh(u) of the last point are kept for it (two hyperbolic functions per step, not four)
+    # MINPACK asks for the Jacobian at the point whose residuals it has just had, and scipy's
+    # leastsq tries both functions at the start point first: the residuals, robust weights and
+    # Jacobian of the last point are kept (and the Jacobian built in one preallocated array, in
+    # MINPACK's column order): per evaluation a few numpy calls on a few hundred points, whose
+    # overhead is most of the cost (36 AHN4 spans 50 -> 38 ms, the same curves to 1e-9 m)
     last = {}
+    jac_out = np.empty((3, len(s)))
 
+    # The robust soft-L1 cost sum(f² ρ((r/f)²)), ρ(t) = 2(√(1+t) − 1), f = 0.1 m, written as plain
+    # least squares of r̃ = r·w, w = √(2/(q+1)), q = √(1+(r/f)²) (Σ r̃² is exactly that cost), so that
+    # MINPACK's Levenberg-Marquardt minimises it: the same curves as scipy's trust-region solver
+    # with loss="soft_l1" at 60 % of its time (to 0.1 mm on 95 of 99 AHN4 and corridor spans; the
+    # other 4, nearly straight pieces where both stop at the cap, within 3 mm).
     def model(p):
         key = (float(p[0]), float(p[1]), float(p[2]))
         if last.get("key") != key:
             c = np.exp(p[2])
-            with np.errstate(over="ignore"):
+            with np.errstate(over="ignore", invalid="ignore"):
                 u = (s - p[1]) / c
                 ch = np.cosh(u)
                 r = p[0] + c * (ch - 1.0) - z  # = catenary(s, p0, p1, c) - z, operation for operation
-            last.update(key=key, c=c, u=u, ch=ch, r=r)
+                q = r / 0.1
+                q *= q
+                q += 1.0
+                np.sqrt(q, out=q)
+                w = np.sqrt(2.0 / (q + 1.0))
+            last.clear()
+            last.update(key=key, c=c, u=u, ch=ch, r=r, q=q, w=w)
         return last
 
     def res(p):  # a copy: scipy's robust-loss path scales residuals in place
@@ -170,24 +185,31 @@ def fit_catenary(s, z):
     def jac(p):  # analytic: 3-4x fewer model evaluations than finite differences
         m = model(p)
         c, u, ch = m["c"], m["u"], m["ch"]
-        with np.errstate(over="ignore"):
+        with np.errstate(over="ignore", invalid="ignore"):
             sh = np.sinh(u)
-            return np.column_stack([np.ones_like(s), -sh, c * (ch - 1.0) - (s - p[1]) * sh])
+            return np.column_stack([np.ones_like(s), -sh, c * (ch - 1.0 - u * sh)])
 
-    # The robust soft-L1 cost sum(f² ρ((r/f)²)), ρ(t) = 2(√(1+t) − 1), f = 0.1 m, written as plain
-    # least squares of r̃ = r·√(2/(q+1)), q = √(1+(r/f)²) (Σ r̃² is exactly that cost), so that
-    # MINPACK's Levenberg-Marquardt minimises it: the same curves as scipy's trust-region solver
-    # with loss="soft_l1" at 60 % of its time (to 0.1 mm on 95 of 99 AHN4 and corridor spans; the
-    # other 4, nearly straight pieces where both stop at the cap, within 3 mm).
     def res_robust(p):
-        r = model(p)["r"]
+        m = model(p)
+        r = m["r"]
         with np.errstate(invalid="ignore"):  # an overflowed trial step stays infinite: rejected
-            return np.where(np.isfinite(r), r * np.sqrt(2.0 / (np.sqrt(1.0 + (r / 0.1) ** 2) + 1.0)), r)
+            return np.where(np.isfinite(r), r * m["w"], r)
 
-    def jac_robust(p):
-        u = model(p)["r"] / 0.1
-        q = np.sqrt(1.0 + u * u)
-        return jac(p) * (np.sqrt(2.0 / (q + 1.0)) * (1.0 - u * u / (2.0 * q * (q + 1.0))))[:, None]
+    def jac_robust(p):  # rows: d r̃ / d(z0, s0, log c)
+        m = model(p)
+        if "jac" not in m:
+            c, u, ch, q, w = m["c"], m["u"], m["ch"], m["q"], m["w"]
+            with np.errstate(over="ignore", invalid="ignore"):
+                g = w * (q + 1.0) / (2.0 * q)  # d r̃ / d r = w (1 - (q - 1) / 2q)
+                sh = np.sinh(u)
+                jac_out[0] = g
+                np.multiply(sh, g, out=jac_out[1])
+                np.negative(jac_out[1], out=jac_out[1])
+                np.multiply(u, sh, out=jac_out[2])  # c (cosh u - 1) - (s - s0) sinh u = c (cosh u - 1 - u sinh u)
+                np.subtract(ch - 1.0, jac_out[2], out=jac_out[2])
+                jac_out[2] *= c * g
+            m["jac"] = True
+        return jac_out
 
     # 50 evaluations settle every well-posed span; short, tight pieces whose c is barely
     # determined crawl along a flat valley without converging, for an rms that changes by a
@@ -197,10 +219,10 @@ def fit_catenary(s, z):
         x0 = np.array([z00, s00, np.log(c0)])
         if len(s) >= 3:
             # MINPACK's lmder called as least_squares(method="lm", max_nfev=50) calls it (the same
-            # tolerances, factor, scaling: the same steps, bit for bit), through leastsq: scipy's
-            # generic wrapper cost more per evaluation than the model (99 spans 140-156 -> 90 ms)
-            x = leastsq(res_robust, x0, Dfun=jac_robust, full_output=True, ftol=1e-8, xtol=1e-8, gtol=1e-8,
-                        maxfev=50, factor=100.0, diag=None)[0]
+            # tolerances, factor, scaling: the same steps), through leastsq: scipy's generic
+            # wrapper cost more per evaluation than the model (99 spans 140-156 -> 90 ms)
+            x = leastsq(res_robust, x0, Dfun=jac_robust, col_deriv=True, full_output=True, ftol=1e-8, xtol=1e-8,
+                        gtol=1e-8, maxfev=50, factor=100.0, diag=None)[0]
         else:
             x = least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50).x
     z0, s0, lc = x
