@@ -58,9 +58,10 @@ def runs_along(t: np.ndarray, max_gap: float, min_length: float):
         return []
     t = np.sort(t)
     breaks = np.flatnonzero(np.diff(t) >= max_gap)
-    starts = np.r_[0, breaks + 1]
-    ends = np.r_[breaks, len(t) - 1]
-    return [(float(t[s]), float(t[e])) for s, e in zip(starts, ends) if t[e] - t[s] >= min_length]
+    # (plain lists: this runs for every peak and line, on a few hundred points)
+    firsts = [float(t[0])] + t[breaks + 1].tolist()
+    lasts = t[breaks].tolist() + [float(t[-1])]
+    return [(a, b) for a, b in zip(firsts, lasts) if b - a >= min_length]
 
 
 def principal_axis(centred: np.ndarray) -> np.ndarray:

@@ -315,9 +315,9 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         _, lab = connected_components(g, directed=False)
         lab = _split_bundles(s, off, lab, min_points)
         wire_of = _chain_pieces(s, z, lab, min_points, gap_max=6 * s_link, z_tol=z_link)
-        for k in range(lab.max() + 1):
+        for k in np.flatnonzero(wire_of >= 0):
             m = lab == k
-            if wire_of[k] < 0 or s[m].max() - s[m].min() < min_span:
+            if s[m].max() - s[m].min() < min_span:
                 continue
             wire = int(wire_of[k])
             sk, zk, ik, ok_ = s[m], z[m], cand[m], off[m]
@@ -368,10 +368,9 @@ def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: i
     lab = lab.copy()
     for _ in range(depth):
         nxt = lab.max() + 1
-        for k in range(lab.max() + 1):
+        # only pieces big enough to split (a graph of scattered points has hundreds of tiny ones)
+        for k in np.flatnonzero(np.bincount(lab) >= 2 * min_points):
             m = np.flatnonzero(lab == k)
-            if len(m) < 2 * min_points:
-                continue
             slope, icpt = line_fit(s[m], off[m])
             trend = slope * s[m] + icpt
             r = off[m] - trend
