@@ -321,19 +321,19 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
         return i
 
     cos_lim = np.cos(np.radians(merge_angle_deg))
-    for i in range(len(found)):
-        for j in range(i + 1, len(found)):
-            a, b = found[i], found[j]
-            if abs(float(np.dot(a.direction, b.direction))) < cos_lim:
-                continue
-            n = np.array([-a.direction[1], a.direction[0]])
-            if abs(float(np.dot(b.anchor - a.anchor, n))) > merge_offset_m:
-                continue
-            # they must overlap or nearly touch along the line (tile overlap, a pylon's gap)
-            ends = sorted(float(np.dot(b.anchor + t * b.direction - a.anchor, a.direction)) for t in b.t_range)
-            if ends[0] > a.t_range[1] + merge_gap_m or ends[1] < a.t_range[0] - merge_gap_m:
-                continue
-            parent[root(j)] = root(i)
+    # the angle and offset tests for all pairs at once (a few thousand pairs per km of corridor)
+    d = np.array([f.direction for f in found]).reshape(-1, 2)
+    p = np.array([f.anchor for f in found]).reshape(-1, 2)
+    normal = np.column_stack([-d[:, 1], d[:, 0]])
+    offset = np.abs(np.einsum("ik,ijk->ij", normal, p[None, :, :] - p[:, None, :]))  # of j from line i
+    close = (np.abs(d @ d.T) >= cos_lim) & (offset <= merge_offset_m)
+    for i, j in zip(*np.nonzero(np.triu(close, k=1))):
+        a, b = found[i], found[j]
+        # they must overlap or nearly touch along the line (tile overlap, a pylon's gap)
+        ends = sorted(float(np.dot(b.anchor + t * b.direction - a.anchor, a.direction)) for t in b.t_range)
+        if ends[0] > a.t_range[1] + merge_gap_m or ends[1] < a.t_range[0] - merge_gap_m:
+            continue
+        parent[root(j)] = root(i)
     groups: dict[int, list[int]] = {}
     for i in range(len(found)):
         groups.setdefault(root(i), []).append(i)
