@@ -130,7 +130,8 @@ def test_detection_loop_takes_the_numpy_peaks(seed):
         ys.append(b + t * np.sin(np.radians(ang)) + rng.normal(0, 0.05, 250))
     x, y = np.concatenate(xs), np.concatenate(ys)
     ref = hough.detect_lines(x, y, reference.NumpyAccumulator, min_votes=8)
-    got = hough.detect_lines(x, y, lambda *a, **kw: hough_kernels.TaichiAccumulator(kernels.taichi(), *a, **kw), min_votes=8)
+    got = hough.detect_lines(x, y, lambda *a, **kw: hough_kernels.TaichiAccumulator(kernels.taichi(), *a, **kw),
+                             min_votes=8)
     assert len(ref) >= 4
     assert [(L.theta_deg, L.rho, L.votes) for L in got] == [(L.theta_deg, L.rho, L.votes) for L in ref]
 

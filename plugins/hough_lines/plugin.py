@@ -49,8 +49,8 @@ def detect(ctx, x, y, params):
     ti = ctx.taichi()
     try:
         return detect_tiled(
-            x, y, lambda *a, **kw: TaichiAccumulator(ti, *a, **kw), tile_size_m=params["tile_size_m"], overlap_m=params["overlap_m"],
-            merge_gap_m=params["merge_gap_m"],
+            x, y, lambda *a, **kw: TaichiAccumulator(ti, *a, **kw), tile_size_m=params["tile_size_m"],
+            overlap_m=params["overlap_m"], merge_gap_m=params["merge_gap_m"],
             max_accumulator_bytes=int(params["max_accumulator_mb"] * 2**20),
             progress=lambda it: ctx.progress(it, desc="hough tiles", unit="tile"), **hough_params(params))
     except AccumulatorTooLarge as exc:
