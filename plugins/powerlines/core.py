@@ -161,7 +161,7 @@ def fit_catenary(s, z):
     # leastsq tries both functions at the start point first: the residuals, robust weights and
     # Jacobian of the last point are kept (and the Jacobian built in one preallocated array, in
     # MINPACK's column order): per evaluation a few numpy calls on a few hundred points, whose
-    # overhead is most of the cost (36 AHN4 spans 50 -> 38 ms, the same curves to 1e-9 m)
+    # overhead is most of the cost (36 AHN4 spans 51 -> 39 ms, the same curves to 1e-5 m)
     last = {}
     jac_out = np.empty((3, len(s)))
 
