@@ -272,7 +272,8 @@ class TaichiAccumulator:
         y = np.asarray(y, np.float32)
         floor = int(floor) if sign < 0 else 0
         if sign > 0 and self.extent is not None and len(x):
-            x0, x1, y0, y1 = self.extent
+            # compared in float32, as the points are binned (rounding keeps a point in its box)
+            x0, x1, y0, y1 = np.asarray(self.extent, np.float32)
             if x.min() < x0 or x.max() > x1 or y.min() < y0 or y.max() > y1:
                 raise ValueError(f"points outside the accumulator's extent {self.extent}")
         for s in range(0, len(x), POINTS_PER_PASS):
