@@ -389,6 +389,58 @@ def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
     return rows
 
 
+def machine_check() -> dict:
+    """A fixed workload timed at the start and the end of a bench, so that figures of runs on
+    different days (or hours) can be compared: this shared 2-core VM's speed swings by 20-40 %
+    with its neighbours (a 10 M-point ``dtm`` took 8.8 s and 14.0 s on one day, code unchanged).
+    The LAZ codec (1 M points, LAS 1.4 format 6, lazrs in one thread) is most of a large tile's
+    time; a memory copy and a sort stand for the array passes."""
+    import io
+
+    rng = np.random.default_rng(0)
+    n = 1_000_000
+    hdr = laspy.LasHeader(version="1.4", point_format=6)
+    hdr.scales = np.array([0.01, 0.01, 0.01])
+    las = laspy.LasData(hdr)
+    las.x, las.y, las.z = rng.uniform(0, 500, n), rng.uniform(0, 500, n), rng.normal(10, 3, n)
+    las.intensity = rng.integers(0, 4000, n).astype(np.uint16)
+    las.gps_time = np.sort(rng.uniform(0, 100, n))
+
+    def encode():
+        buf = io.BytesIO()
+        las.write(buf, do_compress=True, laz_backend=laspy.LazBackend.Lazrs)
+        return buf.getvalue()
+
+    def decode(data):
+        with laspy.open(io.BytesIO(data), laz_backend=laspy.LazBackend.Lazrs) as r:
+            return r.read()
+
+    data = encode()
+    t_enc = min(timed(encode)[0] for _ in range(3))
+    t_dec = min(timed(lambda: decode(data))[0] for _ in range(3))
+    a = np.ones(8 << 20)  # 64 MiB
+    b = np.empty_like(a)
+    t_copy = min(timed(lambda: np.copyto(b, a))[0] for _ in range(10))
+    keys = rng.random(2_000_000)
+    t_sort = min(timed(lambda: np.sort(keys))[0] for _ in range(5))
+    # what every fresh command pays before any work: the stack's imports in a new process (it
+    # swings with the page cache, which this VM's kernel reclaims on its own schedule)
+    import subprocess
+
+    t_imp, _ = timed(lambda: subprocess.run([sys.executable, "-c", "import geopandas, rasterio, scipy.sparse, laspy, taichi"],
+                                            capture_output=True))
+    return {"laz_decode_mpts_s": n / t_dec / 1e6, "laz_encode_mpts_s": n / t_enc / 1e6,
+            "copy_gb_s": 2 * a.nbytes / t_copy / 1e9, "sort_mkeys_s": len(keys) / t_sort / 1e6,
+            "fresh_imports_s": t_imp}
+
+
+def print_machine_check(label: str, m: dict) -> None:
+    print(f"machine check ({label}): LAZ decode {m['laz_decode_mpts_s']:.2f} M pts/s, encode "
+          f"{m['laz_encode_mpts_s']:.2f} M pts/s (one thread); memory copy {m['copy_gb_s']:.1f} GB/s; "
+          f"sort {m['sort_mkeys_s']:.1f} M keys/s; the stack's imports in a fresh process {m['fresh_imports_s']:.2f} s",
+          flush=True)
+
+
 def fmt(v, w=8, d=2):
     return f"{v:{w}.{d}f}" if isinstance(v, (int, float)) and v is not None else f"{'-':>{w}}"
 
@@ -425,6 +477,8 @@ def main(argv=None) -> int:
           "filter = our ground filter alone; CSF = its filter on arrays only (ratio against our filter); "
           "CSF e2e = read + CSF + write the classified LAZ, no DTM (ratio against ours end to end). "
           "ratio = peer s / ours s (> 1: we are faster).")
+    check_start = machine_check()
+    print_machine_check("start", check_start)
     print_header()
     rows = []
     with tempfile.TemporaryDirectory() as d:
@@ -438,6 +492,9 @@ def main(argv=None) -> int:
             rows += bench_hough(tmp)
         if "powerlines" in want:
             rows += bench_powerlines(tmp, large=not (args.no_10m or args.quick))
+    check_end = machine_check()
+    print_machine_check("end", check_end)
+    rows.append({"case": "machine check", "start": check_start, "end": check_end})
     (out_dir / "results.json").write_text(json.dumps(rows, indent=2))
     print(f"results in {out_dir / 'results.json'}")
     return 0
