@@ -253,6 +253,59 @@ def surface_slope(surface: np.ndarray, cell: float) -> np.ndarray:
     return np.hypot(dx, dy)
 
 
+def _neighbour_pairs(shape):
+    """Flat indices of every 4-neighbour cell pair of a grid (each pair once)."""
+    rows, cols = shape
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    a = np.r_[idx[:, :-1].ravel(), idx[:-1, :].ravel()]
+    b = np.r_[idx[:, 1:].ravel(), idx[1:, :].ravel()]
+    return a, b
+
+
+def object_segments(surface, is_object, step):
+    """Connected sets of object cells, neighbours joined where their heights differ by at most
+    ``step``: (label per cell, -1 off the objects; number of segments)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    f = surface.ravel()
+    o = is_object.ravel()
+    a, b = _neighbour_pairs(surface.shape)
+    join = o[a] & o[b] & (np.abs(f[a] - f[b]) <= step)
+    ids = np.flatnonzero(o)
+    pos = np.full(f.size, -1, np.int64)
+    pos[ids] = np.arange(len(ids))
+    g = coo_matrix((np.ones(int(join.sum())), (pos[a[join]], pos[b[join]])), shape=(len(ids), len(ids)))
+    n_seg, lab = connected_components(g, directed=False)
+    label = np.full(f.size, -1, np.int64)
+    label[ids] = lab
+    return label.reshape(surface.shape), n_seg
+
+
+def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1):
+    """Object segments that are not raised above their surroundings: along less than
+    ``raised_share`` of their border (inside ``domain``) they stand more than ``step`` over the
+    neighbouring cell. The connected-operator view of an object (Mongus & Žalik 2014): a terrace or
+    a courtyard that a window opening cuts away lies *below* the buildings around it."""
+    label, n_seg = object_segments(surface, is_object, step)
+    f = surface.ravel()
+    lab = label.ravel()
+    dom = domain.ravel()
+    a, b = _neighbour_pairs(surface.shape)
+    up = np.zeros(n_seg)
+    border = np.zeros(n_seg)
+    for s_, t_ in ((a, b), (b, a)):
+        # borders with cells outside the survey's footprint say nothing either way
+        m = (lab[s_] >= 0) & (lab[s_] != lab[t_]) & dom[t_]
+        border += np.bincount(lab[s_[m]], minlength=n_seg)
+        up += np.bincount(lab[s_[m]], weights=(f[s_[m]] - f[t_[m]] > step), minlength=n_seg)
+    size = np.bincount(lab[lab >= 0], minlength=n_seg)
+    ok = (size >= min_cells) & (border > 0) & (up < raised_share * border)
+    out = np.zeros(f.size, bool)
+    out[lab >= 0] = ok[lab[lab >= 0]]
+    return out.reshape(surface.shape)
+
+
 @dataclass
 class GroundResult:
     ground: np.ndarray  # bool per point
@@ -264,7 +317,7 @@ class GroundResult:
 
 def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, ground_threshold: float,
                   slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True,
-                  accel=None) -> GroundResult:
+                  accel=None, jump=None, min_terrace_cells: int = 1, raised_share: float = 0.5) -> GroundResult:
     """Label ground points (all lengths in the cloud's units).
 
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
@@ -287,6 +340,10 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
     filled = fill_holes(zmin, occupied, domain)
     is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
+    if jump is not None:
+        # a window opening also cuts away terraces, courtyards and ground between buildings: the
+        # connected-operator test keeps the object sets that are not raised above their surroundings
+        is_object &= ~not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells)
     keep = occupied & ~is_object
     if not keep.any():
         keep = occupied

@@ -25,11 +25,19 @@ GROUND_PARAMETERS = [
               minimum=0.0, maximum=10.0),
     Parameter("low_outlier_m", float, 2.0, "points this far below their neighbourhood are noise (class 7)",
               unit="m", minimum=0.1, maximum=100.0),
+    Parameter("jump_m", float, 1.5, "height jump between neighbouring filter cells that separates two surfaces "
+              "(a wall, a terrace edge); a set the opening removed stays ground unless it stands more than "
+              "this over its surroundings along at least half its border; 0 keeps the opening alone",
+              unit="m", minimum=0.0, maximum=50.0),
+    Parameter("min_terrace_m2", float, 40.0, "smallest such set (terrace, courtyard) given back to the ground",
+              unit="m2", minimum=0.0, maximum=1e6),
 ]
 
 
 def _ground(pc, p, accel=None):
     """Run the ground filter with the parameters converted to the cloud's units."""
+    import numpy as np
+
     from .core import Grid, ground_filter
 
     pc.require_points("the ground filter", 10)
@@ -40,6 +48,8 @@ def _ground(pc, p, accel=None):
         pc.x, pc.y, pc.z, cell=cell, max_size=p["max_filter_size_m"] / hu,
         k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
         slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu, accel=accel,
+        jump=p["jump_m"] / vu if p["jump_m"] > 0 else None,
+        min_terrace_cells=max(1, int(np.ceil(p["min_terrace_m2"] / (p["filter_cell_m"] ** 2)))),
     ), Grid
 
 
