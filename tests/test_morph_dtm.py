@@ -58,13 +58,92 @@ def test_low_outliers_become_noise(terrain_scene, tmp_path):
     assert not np.any(pred[truth.classification == 7] == 2) or (pred[low] == 2).sum() == 0
 
 
-@pytest.mark.parametrize("sample, limit", [("samp11", 10.0), ("samp12", 3.0)])
-def test_isprs_reference_samples_with_default_parameters(sample, limit, tmp_path):
-    path = shared_file(f"isprs_filtertest/{sample}.txt")
-    rep = toolbox.run("dtm", path, tmp_path / "d.tif", crs="EPSG:32632")
-    s = rep["stats"]
-    assert s["isprs_total_pct"] <= limit, s
-    assert s["isprs_kappa"] >= 0.8
+ISPRS_SAMPLES = ("samp11", "samp12", "samp21_f32", "samp23_f32", "samp24_f32", "samp31_f32", "samp41_f32",
+                 "samp51_f32", "samp52_f32", "samp53_f32", "samp61_f32", "samp71_f32")
+
+
+def _isprs_scores(tmp_path):
+    from conftest import SHARED_DATA
+
+    present = [s for s in ISPRS_SAMPLES if (SHARED_DATA / "isprs_filtertest" / f"{s}.txt").exists()]
+    if not present:
+        shared_file("isprs_filtertest/samp11.txt")  # skips with the reason
+    scores = {}
+    for s in present:
+        rep = toolbox.run("dtm", SHARED_DATA / "isprs_filtertest" / f"{s}.txt", tmp_path / f"{s}.tif",
+                          crs="EPSG:32632")
+        scores[s] = rep["stats"]
+    return scores
+
+
+def test_isprs_reference_samples_with_one_default_parameter_set(tmp_path):
+    """Every ISPRS filter-test sample present, one parameter set (the defaults), against the
+    reference labels. The bounds are this filter's measured figures with a small margin (12-sample
+    mean 4.25 %, kappa 0.840; SMRF with PDAL's defaults: 5.06 %, 0.823): a regression fails."""
+    scores = _isprs_scores(tmp_path)
+    for s, st in scores.items():
+        assert st["isprs_total_pct"] <= 10.0, (s, st)
+    if "samp11" in scores:
+        assert scores["samp11"]["isprs_total_pct"] <= 9.5
+    if "samp12" in scores:
+        assert scores["samp12"]["isprs_total_pct"] <= 3.5
+    if "samp41_f32" in scores:  # ground on a terrace between buildings, cut away by the opening before
+        assert scores["samp41_f32"]["isprs_total_pct"] <= 8.0
+    if len(scores) < len(ISPRS_SAMPLES):
+        pytest.skip(f"the 12-sample mean needs all of {ISPRS_SAMPLES}; only {sorted(scores)} are present")
+    mean = np.mean([st["isprs_total_pct"] for st in scores.values()])
+    kappa = np.mean([st["isprs_kappa"] for st in scores.values()])
+    assert mean <= 4.4, {s: st["isprs_total_pct"] for s, st in scores.items()}
+    assert kappa >= 0.83
+
+
+def _terrace_scene():
+    """Lower ground (z 0), a terrace 6 m higher behind a retaining wall on its east side, and a
+    20 m building block wrapped round its other three sides (ISPRS samp41's layout); terrace and
+    block together narrower than the largest window."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0, 120, 60000)
+    y = rng.uniform(0, 100, 60000)
+    z = np.zeros_like(x)
+    terrace = (x >= 24) & (x < 48) & (y >= 15) & (y < 85)
+    building = (x >= 12) & (x < 60) & (y >= 3) & (y < 97) & ~terrace & ~((x >= 48) & (y >= 15) & (y < 85))
+    z[terrace] = 6.0
+    z[building] = 20.0
+    z += rng.normal(0, 0.03, len(z))
+    return x, y, z, terrace, building
+
+
+def test_a_terrace_below_buildings_stays_ground():
+    x, y, z, terrace, building = _terrace_scene()
+    args = dict(cell=2.0, max_size=50.0, k=0.08, n=0.45, ground_threshold=0.25, slope_factor=1.0, low_outlier=2.0)
+    opening_only = core.ground_filter(x, y, z, **args)
+    assert opening_only.ground[terrace].mean() < 0.5  # the window opening takes the terrace for an object
+    r = core.ground_filter(x, y, z, **args, jump=1.5, min_terrace_cells=10)
+    assert r.ground[terrace].mean() > 0.95  # all but the cells against the walls
+    assert r.ground[building].mean() < 0.01  # raised above the terrace and the lower ground: still objects
+    assert r.ground[~terrace & ~building].mean() > 0.98
+
+
+def test_not_raised_tells_terraces_from_roofs():
+    """On a grid: a building raised all round stays an object, a lower wing against a higher
+    roof (ground on three sides) too; a pit-like terrace below its neighbours does not."""
+    surf = np.zeros((60, 60))
+    surf[5:15, 5:15] = 8.0  # a building
+    surf[25:35, 5:15] = 5.0  # a lower wing ...
+    surf[25:35, 15:25] = 12.0  # ... against a higher roof
+    surf[40:55, 40:55] = 20.0  # a ring of buildings ...
+    surf[44:51, 44:51] = 3.0  # ... round a raised court
+    obj = surf > 0
+    dom = np.ones_like(obj)
+    keep = core.not_raised(surf, obj, dom, step=1.5)
+    assert not keep[5:15, 5:15].any()
+    assert not keep[25:35, 5:25].any()
+    assert keep[44:51, 44:51].all() and not keep[40:44, 40:55].any()
+    label, n = core.object_segments(surf, obj, 1.5)
+    assert n == 5 and (label[~obj] == -1).all()
+    assert len(np.unique(label[25:35, 5:15])) == 1 and label[30, 10] != label[30, 20]
+    # a segment smaller than min_cells is never given back
+    assert not core.not_raised(surf, obj, dom, step=1.5, min_cells=50)[44:51, 44:51].any()
 
 
 def test_ground_errors_definitions():
