@@ -3,8 +3,8 @@
 Prints a table: case, points, our seconds, each peer's seconds, ratio (peer / ours, > 1 means we
 are faster), and the accuracy of each where the input has truth. Results also go to
 bench-output/results.json. Peers (benchmark extras, never runtime dependencies):
-whitebox-workflows (improved ground point filter, hillshade), cloth-simulation-filter (CSF) and
-scikit-image (Hough lines).
+whitebox-workflows (improved ground point filter, hillshade), cloth-simulation-filter (CSF), SMRF
+(pysmrf, PDAL's default parameters) and scikit-image / OpenCV (Hough lines).
 
     python benchmarks/run.py [--quick] [--no-10m]
 """
@@ -80,6 +80,81 @@ def csf_ground(pc):
     mask = np.zeros(len(pc), bool)
     mask[np.asarray(g, dtype=np.int64)] = True
     return t, mask
+
+
+def smrf_ground(pc):
+    """SMRF (Pingel et al. 2013) through the PyPI package pysmrf, with PDAL's filters.smrf defaults:
+    cell 1 m, window 18 m, slope 0.15, elevation threshold 0.5 m, scalar 1.25."""
+    try:
+        import pysmrf
+    except ImportError:
+        return None, None
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    t, r = timed(lambda: pysmrf.classify(pc.x, pc.y, pc.z, cellsize=1.0 / hu, windows=18, slope_threshold=0.15 * hu / vu,
+                                         elevation_threshold=0.5 / vu, elevation_scaler=1.25))
+    return t, np.asarray(r.is_ground, bool)
+
+
+ISPRS = ("samp11", "samp12", "samp21_f32", "samp23_f32", "samp24_f32", "samp31_f32", "samp41_f32", "samp51_f32",
+         "samp52_f32", "samp53_f32", "samp61_f32", "samp71_f32")
+
+
+def bench_isprs(tmp: Path) -> list[dict]:
+    """Every ISPRS filter-test sample present: type I, type II, total error and kappa of ours (the
+    default parameters, one set for all), SMRF, CSF and whitebox-workflows, the time of each, and
+    the mean row. Ours is timed end to end through toolbox.run; the peers on arrays (SMRF, CSF)
+    or file to file (whitebox)."""
+    from toolbox.io.points import write_points
+
+    rows = []
+    present = [s for s in ISPRS if (SHARED / "isprs_filtertest" / f"{s}.txt").exists()]
+    if not present:
+        print("  (skipping the ISPRS table: ../shared/data/isprs_filtertest is absent)")
+        return rows
+    peers = ("ours", "smrf", "csf", "whitebox")
+    print(f"\nISPRS filter test, {len(present)} reference samples, one parameter set each "
+          "(ours: defaults; SMRF: PDAL's defaults; CSF: slope smoothing on; whitebox: defaults)")
+    print(f"{'sample':<8} {'points':>7}  " + "  ".join(f"{p + ' T1/T2/total %, kappa, s':>38}" for p in peers))
+    for s in present:
+        path = SHARED / "isprs_filtertest" / f"{s}.txt"
+        pc = read_points(path, crs="EPSG:32632")
+        truth = pc.fields["label"] == 0
+        t_ours, _ = timed(lambda: toolbox.run("dtm", path, tmp / "isprs.tif", overwrite=True, crs="EPSG:32632"))
+        ours = np.asarray(laspy.read(tmp / "isprs_classified.laz").classification) == 2
+        las_in = tmp / "isprs_peer.las"
+        write_points(pc, las_in, overwrite=True)
+        found = {"ours": (t_ours, ours), "smrf": smrf_ground(pc), "csf": csf_ground(pc),
+                 "whitebox": whitebox_ground(las_in, tmp / "isprs_wb.las")}
+        row = {"case": f"isprs {s}", "points": len(pc)}
+        cells = []
+        for p in peers:
+            t, m = found[p]
+            if m is None:
+                cells.append(f"{'(not installed)':>38}")
+                continue
+            e = ground_errors(truth, m)
+            row[p] = dict(e, seconds=round(t, 3))
+            cells.append(f"{e['type1_pct']:6.2f}/{e['type2_pct']:6.2f}/{e['total_pct']:6.2f}  {e['kappa']:6.3f} {t:7.2f}")
+        rows.append(row)
+        print(f"{s.split('_')[0]:<8} {len(pc):>7,}  " + "  ".join(cells), flush=True)
+    mean = {"case": "isprs mean", "samples": len(rows)}
+    cells = []
+    for p in peers:
+        got = [r[p] for r in rows if p in r]
+        if len(got) != len(rows):
+            cells.append(f"{'-':>38}")
+            continue
+        mean[p] = {k: round(float(np.mean([g[k] for g in got])), 4) for k in got[0]}
+        m = mean[p]
+        cells.append(f"{m['type1_pct']:6.2f}/{m['type2_pct']:6.2f}/{m['total_pct']:6.2f}  {m['kappa']:6.3f} "
+                     f"{m['seconds'] * len(got):7.2f}")
+    if "smrf" in mean:
+        mean["ours_better_than_smrf"] = sum(r["ours"]["total_pct"] < r["smrf"]["total_pct"] for r in rows)
+    print(f"{'mean':<8} {'':>7}  " + "  ".join(cells) + "   (time: the sum)")
+    if "ours_better_than_smrf" in mean:
+        print(f"ours lower total error than SMRF on {mean['ours_better_than_smrf']} of {len(rows)} samples")
+    rows.append(mean)
+    return rows
 
 
 def ground_cases(tmp: Path, with_10m: bool, quick: bool):
@@ -175,6 +250,7 @@ def bench_ground(tmp: Path, with_10m: bool, quick: bool) -> list[dict]:
         write_points(pc, las_in, overwrite=True)
         t_wb, wb = best(lambda: whitebox_ground(las_in, tmp / "wb.las"))
         t_csf, csf = best(lambda: csf_ground(pc))
+        t_smrf, smrf = best(lambda: smrf_ground(pc)) if len(pc) < 5_000_000 else (None, None)  # pure Python, slow
         # CSF end to end, the same work as ours: read the file, filter, write the classified LAZ
         t_csf_e2e = None
         if t_csf is not None:
@@ -185,13 +261,16 @@ def bench_ground(tmp: Path, with_10m: bool, quick: bool) -> list[dict]:
                 write_points(p2.with_fields(classification=cls), tmp / "csf.laz", overwrite=True)
             t_csf_e2e, _ = best(lambda: timed(csf_e2e))
         row = {"case": f"ground/DTM: {label}", "points": len(pc), "ours_s": t_ours,
-               "ours_filter_s": rep["stats"]["filter_s"], "whitebox_s": t_wb, "csf_s": t_csf, "csf_e2e_s": t_csf_e2e}
+               "ours_filter_s": rep["stats"]["filter_s"], "whitebox_s": t_wb, "csf_s": t_csf, "csf_e2e_s": t_csf_e2e,
+               "smrf_s": t_smrf}
         if truth is not None:
             row["ours_total_err_pct"] = ground_errors(truth, ours)["total_pct"]
             if wb is not None:
                 row["whitebox_total_err_pct"] = ground_errors(truth, wb)["total_pct"]
             if csf is not None:
                 row["csf_total_err_pct"] = ground_errors(truth, csf)["total_pct"]
+            if smrf is not None:
+                row["smrf_total_err_pct"] = ground_errors(truth, smrf)["total_pct"]
         rows.append(row)
         print_row(row)
     label, path = cases[-1][0], cases[-1][1]
@@ -447,19 +526,21 @@ def fmt(v, w=8, d=2):
 
 def print_header():
     print(f"{'case':<44} {'points':>10} {'ours s':>8} {'Mpt/s':>6} {'wbw s':>8} {'ratio':>6} {'filter':>8} {'CSF s':>8}"
-          f" {'ratio':>6} {'CSF e2e':>8} {'ratio':>6}  {'err% ours/wbw/CSF':>20}")
+          f" {'ratio':>6} {'CSF e2e':>8} {'ratio':>6} {'SMRF s':>8} {'ratio':>6}  {'err% ours/wbw/CSF/SMRF':>24}")
 
 
 def print_row(r):
     ratio_wb = r["whitebox_s"] / r["ours_s"] if r.get("whitebox_s") else None
     # CSF's bare filter against our bare filter; CSF end to end against ours end to end
     ratio_csf = r["csf_s"] / r["ours_filter_s"] if r.get("csf_s") and r.get("ours_filter_s") else None
-    err = "/".join(fmt(r.get(k), 0, 2).strip() for k in ("ours_total_err_pct", "whitebox_total_err_pct", "csf_total_err_pct")) \
+    err = "/".join(fmt(r.get(k), 0, 2).strip() for k in ("ours_total_err_pct", "whitebox_total_err_pct", "csf_total_err_pct",
+                                                         "smrf_total_err_pct")) \
         if "ours_total_err_pct" in r else ""
     print(f"{r['case']:<44} {r['points']:>10,} {fmt(r['ours_s'])} {fmt(r['points'] / r['ours_s'] / 1e6, 6)} "
           f"{fmt(r.get('whitebox_s'))} {fmt(ratio_wb, 6)} {fmt(r.get('ours_filter_s'))} {fmt(r.get('csf_s'))} "
           f"{fmt(ratio_csf, 6)} "
-          f"{fmt(r.get('csf_e2e_s'))} {fmt(r['csf_e2e_s'] / r['ours_s'] if r.get('csf_e2e_s') else None, 6)}  {err:>20}",
+          f"{fmt(r.get('csf_e2e_s'))} {fmt(r['csf_e2e_s'] / r['ours_s'] if r.get('csf_e2e_s') else None, 6)} "
+          f"{fmt(r.get('smrf_s'))} {fmt(r['smrf_s'] / r['ours_s'] if r.get('smrf_s') else None, 6)}  {err:>24}",
           flush=True)
 
 
@@ -468,7 +549,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small inputs only")
     ap.add_argument("--no-10m", action="store_true",
                     help="skip the large synthetic inputs (the 10-million-point tile, the 3 km corridor)")
-    ap.add_argument("--only", choices=("ground", "hillshade", "hough", "powerlines"), action="append",
+    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines"), action="append",
                     help="run only these sections (repeatable); results.json then holds only them")
     args = ap.parse_args(argv)
     out_dir = ROOT / "bench-output"
@@ -483,9 +564,11 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        want = set(args.only or ("ground", "hillshade", "hough", "powerlines"))
+        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines"))
         if "ground" in want:
             rows += bench_ground(tmp, not args.no_10m, args.quick)
+        if "isprs" in want:
+            rows += bench_isprs(tmp)
         if "hillshade" in want:
             rows += bench_hillshade(tmp)
         if "hough" in want:
