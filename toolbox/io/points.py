@@ -354,6 +354,21 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
     return _apply_crs(pc, crs_final, hdr)
 
 
+def _decode_errors() -> tuple:
+    """What laspy and its LAZ backends raise on a damaged file: lazrs's errors are RuntimeErrors,
+    LASzip's (the `laszip` wheel, which laspy prefers when it is installed) are not."""
+    import laspy
+
+    errors = [laspy.errors.LaspyException, ValueError, EOFError, OSError, RuntimeError]
+    try:
+        from laszip import LaszipError
+    except ImportError:
+        pass
+    else:
+        errors.append(LaszipError)
+    return tuple(errors)
+
+
 def _read_las_data(path: Path, selection=None):
     import laspy
 
@@ -366,7 +381,7 @@ def _read_las_data(path: Path, selection=None):
         if "signature" in msg.lower():
             raise DataError(f"input {str(path)!r} is not a LAS/LAZ file (bad file signature); check the file") from None
         raise DataError(f"input {str(path)!r} could not be read as LAS/LAZ ({_short(msg)}); the file may be truncated or corrupt") from None
-    except (ValueError, EOFError, OSError, RuntimeError) as exc:
+    except _decode_errors() as exc:
         raise DataError(f"input {str(path)!r} could not be read as LAS/LAZ ({_short(str(exc))}); the file may be truncated or corrupt") from None
     if len(las.points) != expected:
         raise DataError(
@@ -403,7 +418,7 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
                     fields=fields, source=str(path), header=hdr,
                 )
                 yield _apply_crs(pc, crs_final, hdr)
-        except (laspy.errors.LaspyException, ValueError, EOFError, OSError, RuntimeError) as exc:
+        except _decode_errors() as exc:
             raise DataError(f"input {str(path)!r} is truncated or corrupt after {seen} points ({_short(str(exc))})") from None
         if seen != hdr.point_count:
             raise DataError(f"input {str(path)!r} is truncated: the header promises {hdr.point_count} points, the file holds {seen}")
