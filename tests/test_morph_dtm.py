@@ -62,6 +62,11 @@ ISPRS_SAMPLES = ("samp11", "samp12", "samp21_f32", "samp23_f32", "samp24_f32", "
                  "samp51_f32", "samp52_f32", "samp53_f32", "samp61_f32", "samp71_f32")
 
 
+from conftest import SHARED_DATA
+
+SHARED_DATA_ISPRS = SHARED_DATA / "isprs_filtertest"
+
+
 def _isprs_scores(tmp_path):
     from conftest import SHARED_DATA
 
@@ -89,6 +94,10 @@ def test_isprs_reference_samples_with_one_default_parameter_set(tmp_path):
         assert scores["samp12"]["isprs_total_pct"] <= 3.5
     if "samp41_f32" in scores:  # ground on a terrace between buildings, cut away by the opening before
         assert scores["samp41_f32"]["isprs_total_pct"] <= 8.0
+        assert scores["samp41_f32"]["terrace_m2_kept"] > 1000  # reported in the run report
+        alone = toolbox.run("dtm", SHARED_DATA_ISPRS / "samp41_f32.txt", tmp_path / "alone.tif",
+                            crs="EPSG:32632", jump_m=0.0)["stats"]  # the opening alone, as the method has it
+        assert alone["terrace_m2_kept"] is None and alone["isprs_total_pct"] > 12.0
     if len(scores) < len(ISPRS_SAMPLES):
         pytest.skip(f"the 12-sample mean needs all of {ISPRS_SAMPLES}; only {sorted(scores)} are present")
     mean = np.mean([st["isprs_total_pct"] for st in scores.values()])

@@ -313,6 +313,7 @@ class GroundResult:
     grid: Grid
     provisional: np.ndarray  # provisional bare-earth surface on the filter grid
     object_cells: np.ndarray  # cells removed by the multi-scale filter
+    terrace_cells: np.ndarray | None = None  # cells the opening removed that the segment test kept
 
 
 def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, ground_threshold: float,
@@ -323,7 +324,10 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
        neighbourhood).
     2. Empty cells filled (harmonic), then the multi-scale opening marks object cells
-       (Δh ≥ n + k·size up to ``max_size``).
+       (Δh ≥ n + k·size up to ``max_size``). With ``jump``, object cells are grouped into
+       segments (neighbours less than ``jump`` apart in height), and a segment of at least
+       ``min_terrace_cells`` that stands more than ``jump`` over its neighbours along less than
+       ``raised_share`` of its border is ground again (``not_raised``).
     3. The remaining cells' minima, holes filled, give a provisional bare earth; a point is
        ground when it lies within ``ground_threshold + slope_factor · slope · cell`` of it
        (steep cells tolerate more, as a cell's points spread over its height range).
@@ -340,10 +344,12 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
     filled = fill_holes(zmin, occupied, domain)
     is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
+    terraces = None
     if jump is not None:
         # a window opening also cuts away terraces, courtyards and ground between buildings: the
         # connected-operator test keeps the object sets that are not raised above their surroundings
-        is_object &= ~not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells)
+        terraces = not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells)
+        is_object &= ~terraces
     keep = occupied & ~is_object
     if not keep.any():
         keep = occupied
@@ -368,7 +374,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
         ground &= ~noise
         provisional = refined
     noise |= dz < -2 * low_outlier
-    return GroundResult(ground, noise, grid, provisional, is_object)
+    return GroundResult(ground, noise, grid, provisional, is_object, terraces)
 
 
 def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):
