@@ -361,21 +361,34 @@ def test_wire_points_on_synthetic_truth(corridor_result, corridor):
     assert precision >= 0.98 and recall >= 0.9
 
 
-def test_ahn4_corridor_wire_points_and_lines(tmp_path):
-    path = shared_file("ahn4_corridor/07CZ2_14.laz")
-    las = laspy.read(path)
-    keep = np.isin(las.classification, [1, 2, 9, 14, 15])  # drop the repo author's synthetic 5 and 26
+def _ahn4_real(name, tmp_path):
+    """An AHN4 corridor tile with the repo author's synthetic classes 5 and 26 dropped."""
+    las = laspy.read(shared_file(f"ahn4_corridor/{name}.laz"))
     sub = laspy.LasData(las.header)
-    sub.points = las.points[keep]
-    sub.write(tmp_path / "ahn4.laz")
-    # AHN4's conductors lie side by side 0.25-0.5 m apart: the method's 0.5 m top-hat cell merges
-    # them into a band its opening keeps, so this line needs a finer cell (see the notes)
-    rep = toolbox.run("powerlines", tmp_path / "ahn4.laz", tmp_path / "pl.gpkg", crs="EPSG:28992", cell_size_m=0.1,
+    sub.points = las.points[np.isin(las.classification, [1, 2, 9, 14, 15])]
+    sub.write(tmp_path / f"{name}.laz")
+    return tmp_path / f"{name}.laz", sub
+
+
+@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.97), ("12AN2_20", 0.92)])
+def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
+    """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (12AN2_20's
+    sparse earth wires on top are the misses left: see the issue notes)."""
+    path, sub = _ahn4_real(name, tmp_path)
+    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992",
                       outputs={"classified": str(tmp_path / "w.laz")})
+    assert rep["stats"]["cell_size_m_used"] == pytest.approx(0.133)  # reported
     truth = np.asarray(sub.classification) == 14
     pred = laspy.read(tmp_path / "w.laz").classification == 14
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
-    assert precision >= 0.95 and recall >= 0.95, (precision, recall)
+    assert precision >= 0.97 and recall >= min_recall, (precision, recall)
+
+
+def test_ahn4_corridor_wire_points_and_lines(tmp_path):
+    path, sub = _ahn4_real("07CZ2_14", tmp_path)
+    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992",
+                      outputs={"classified": str(tmp_path / "w.laz")})
+    truth = np.asarray(sub.classification) == 14
     # the 3D conductor lines lie on the producer's class-14 points
     from scipy.spatial import cKDTree
 
@@ -391,7 +404,7 @@ def test_ahn4_corridor_wire_points_and_lines(tmp_path):
     # ...and the conductors run along the points (bounded below by the along-wire point spacing)
     d_back, _ = cKDTree(wires).query(samples)
     assert np.median(d_back) <= 0.2, np.median(d_back)
-    assert rep["stats"]["n_conductors"] >= 4
+    assert rep["stats"]["n_wires_3d"] >= 8  # four conductor levels on each of the two circuits
 
 
 def test_accumulator_too_big_is_a_clear_error(corridor, tmp_path, cli):
@@ -458,20 +471,16 @@ def test_hough_lines_on_a_binary_raster_finds_the_edges_of_a_building(tmp_path):
         assert d < 0.5, (p, d)
 
 
-def test_default_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, caplog):
-    """The method's 0.5 m top-hat cell finds nothing on AHN4's side-by-side conductors; the run
-    says so and names the parameter instead of returning an empty file silently."""
+def test_the_methods_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, caplog):
+    """The method's 0.5 m top-hat cell, asked for explicitly, finds nothing on AHN4's side-by-side
+    conductors; the run says so and names the parameter instead of returning an empty file."""
     import logging
 
-    path = shared_file("ahn4_corridor/07CZ2_14.laz")
-    las = laspy.read(path)
-    sub = laspy.LasData(las.header)
-    sub.points = las.points[np.isin(las.classification, [1, 2, 9, 14, 15])]
-    sub.write(tmp_path / "ahn4.laz")
+    path, _ = _ahn4_real("07CZ2_14", tmp_path)
     with caplog.at_level(logging.WARNING):
-        rep = toolbox.run("powerlines", tmp_path / "ahn4.laz", tmp_path / "pl.gpkg", crs="EPSG:28992")
+        rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992", cell_size_m=0.5)
     assert rep["stats"]["n_conductors"] == 0
-    assert any("try --set cell_size_m=0.1" in r.getMessage() for r in caplog.records)
+    assert any("leave cell_size_m automatic" in r.getMessage() for r in caplog.records)
 
 
 def test_closed_form_eigen_matches_numpy():

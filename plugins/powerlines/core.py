@@ -280,13 +280,20 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
-                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.12):
+                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None):
     """Wires and their catenary spans along each 2D line.
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points. Returns
     (spans, line_of, wire_of): per point the line and the wire it belongs to (-1: none).
+
+    A line's band reaches ``reach`` (default: ``band``) past the ends of its 2D extent, and each
+    point belongs to the nearest line that reaches it: a short line of another heading (a crossing
+    structure, a tile's stub) does not take the points of a long line it would meet if it were
+    extended. Once a line's catenaries are fitted, its points within their tolerance are wire
+    points even where their piece was too small to fit on its own.
     """
-    tree = cKDTree(np.column_stack([px, py]))
+    if reach is None:
+        reach = band
     spans: list[Span] = []
     line_of = np.full(len(px), -1, np.int64)
     wire_of_point = np.full(len(px), -1, np.int64)
@@ -296,14 +303,15 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     for li, (anchor, direction, t0, t1) in enumerate(lines):
         normal = np.array([-direction[1], direction[0]])
         d = np.abs((px - anchor[0]) * normal[0] + (py - anchor[1]) * normal[1])
-        closer = d < best
-        owner[closer], best[closer] = li, d[closer]
+        along = (px - anchor[0]) * direction[0] + (py - anchor[1]) * direction[1]
+        beyond = np.maximum(np.maximum(t0 - along, along - t1), 0.0)
+        score = np.where(beyond <= reach, d, np.inf)
+        closer = score < best
+        owner[closer], best[closer] = li, score[closer]
     for li, (anchor, direction, t0, t1) in enumerate(lines):
         normal = np.array([-direction[1], direction[0]])
-        mid = anchor + direction * (t0 + t1) / 2
-        half = (t1 - t0) / 2 + band
-        cand = np.asarray(tree.query_ball_point(mid, np.hypot(half, band)), dtype=np.int64)
-        cand = cand[owner[cand] == li]
+        cand = np.flatnonzero((owner == li) & (best <= band))
+        t0, t1 = t0 - reach, t1 + reach
         if len(cand) == 0:
             continue
         d = np.column_stack([px[cand], py[cand]]) - anchor
@@ -315,7 +323,8 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             continue
         z = pz[cand]
         # height, continuity and lateral position: link points close along the line, in height and
-        # across it (conductors side by side 0.25 m apart at similar heights come apart too)
+        # across it (within ALS scatter across a wire; sub-conductors of a bundle, closer than that,
+        # are told apart afterwards by _split_bundles)
         scaled = np.column_stack([s / s_link, z / z_link, off / off_link])
         pairs = cKDTree(scaled).query_pairs(1.0, output_type="ndarray")
         g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
@@ -365,7 +374,29 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                     resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
                     on = ik[sel][resid <= max(3 * rms, 0.15)]
                     line_of[on], wire_of_point[on] = li, wire
+        _pick_up(li, [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms], cand, s, z, off,
+                 line_of, wire_of_point)
     return spans, line_of, wire_of_point
+
+
+def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m: float = 0.5):
+    """Points of a line's band not yet on a wire that lie on one of its fitted spans (within the
+    span's extent, ``lateral_m`` of its plan position and its fit tolerance): pieces of a wire
+    too small to fit alone (sparse stretches, a sub-conductor seen a few times)."""
+    free = line_of[cand] < 0
+    if not line_spans or not free.any():
+        return
+    fs, fz, fo, fi = s[free], z[free], off[free], cand[free]
+    best_r = np.full(len(fs), np.inf)
+    best_w = np.full(len(fs), -1)
+    for sp in line_spans:
+        inside = (fs >= sp.s_from - 0.5) & (fs <= sp.s_to + 0.5) & \
+                 (np.abs(fo - (sp.offset + sp.offset_slope * fs)) <= lateral_m)
+        r = np.where(inside, np.abs(catenary(fs, sp.z0, sp.s0, sp.c) - fz), np.inf)
+        better = (r <= max(3 * sp.rms, 0.15)) & (r < best_r)
+        best_r[better], best_w[better] = r[better], sp.wire
+    got = best_w >= 0
+    line_of[fi[got]], wire_of_point[fi[got]] = li, best_w[got]
 
 
 def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:

@@ -63,7 +63,11 @@ def _run(inputs, params, ctx):
     # 3. top-hat filter and 4. tiled Hough (through their algorithms)
     t = time.perf_counter()
     sub = pc.subset(keep)
-    th = ctx.call("tophat", {"points": sub}, cell_size_m=params["cell_size_m"],
+    # the mask cell must keep conductors band_m apart (the closest the Hough tells apart) in
+    # separate cells with an empty one between them, or the opening keeps their band and the
+    # top-hat throws the wires away (AHN4's side-by-side conductors at the method's 0.5 m)
+    cell_used = params["cell_size_m"] if params["cell_size_m"] is not None else round(params["band_m"] / 3, 3)
+    th = ctx.call("tophat", {"points": sub}, cell_size_m=cell_used,
                   max_points_per_cell=params["max_points_per_cell"]).outputs["points"]
     timings["tophat_s"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -145,10 +149,10 @@ def _run(inputs, params, ctx):
         # opening keeps, and the top-hat throws the wires away
         ctx.log.warning(
             "powerlines: the top-hat kept %d of %d wire-like points and no conductor was found; conductors "
-            "hanging side by side closer than cell_size_m=%g merge into a band the opening removes - "
-            "try --set cell_size_m=0.1", len(th), len(keep), params["cell_size_m"])
+            "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
+            "leave cell_size_m automatic or set it to a third of their spacing", len(th), len(keep), cell_used)
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
-             "height_max_m_used": round(h_max, 2), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "height_max_m_used": round(h_max, 2), "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
@@ -198,7 +202,10 @@ def toolbox_algorithms():
                       "vegetation", minimum=0.0, maximum=0.34),
             Parameter("planar_share", float, 0.2, "middle-eigenvalue share above which a flat neighbourhood is a roof",
                       minimum=0.0, maximum=0.5),
-            Parameter("cell_size_m", float, 0.5, "top-hat mask cell", unit="m", minimum=0.01, maximum=10.0),
+            Parameter("cell_size_m", float, None, "top-hat mask cell; auto: band_m / 3 (0.13 m), so that conductors "
+                      "side by side band_m apart (bundles, three-phase ribbons) stay separate lines the top-hat keeps; "
+                      "the method's 0.5 m suits single wires 1.5 m apart or more", unit="m", minimum=0.01,
+                      maximum=10.0, allow_auto=True),
             Parameter("max_points_per_cell", int, 45, "top-hat: denser cells are dropped", unit="points", minimum=1),
             # the Hough stage's parameters (passed on to the hough-lines algorithm), the method's values
             Parameter("theta_step_deg", float, 0.1, "θ resolution of the accumulator", unit="deg", minimum=0.001,
