@@ -174,7 +174,7 @@ def fit_catenary(s, z):
         key = (float(p[0]), float(p[1]), float(p[2]))
         if last.get("key") != key:
             c = np.exp(p[2])
-            with np.errstate(over="ignore", invalid="ignore"):
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # c underflows on hopeless pieces
                 u = (s - p[1]) / c
                 ch = np.cosh(u)
                 r = p[0] + c * (ch - 1.0) - z  # = catenary(s, p0, p1, c) - z, operation for operation
@@ -238,7 +238,9 @@ def fit_catenary(s, z):
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit
     mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
     inl = np.abs(r) <= max(3 * mad, 0.15)
-    return float(z0), float(s0), float(np.exp(lc)), float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else np.inf
+    with np.errstate(over="ignore"):  # a hopeless piece's residuals may be huge: its rms is then inf
+        rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else np.inf
+    return float(z0), float(s0), float(np.exp(lc)), rms
 
 
 def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02):
