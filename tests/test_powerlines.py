@@ -321,6 +321,31 @@ def test_every_conductor_found_no_false_one(corridor_result):
     assert set(cond.columns) >= {"votes", "n_points", "length_m", "rms_m", "height_min_m", "height_max_m"}
 
 
+def test_pylons_on_the_synthetic_corridor(corridor, corridor_result):
+    """Towers where spans end on a tall column: the lattice towers and the distribution poles of
+    the scene's truth, each within 2 m, none false; their points are class 15. (Two poles of
+    line B are missed: the 3D step does not split the wire there, so no span ends at them.)"""
+    rep, gpkg, wires, truth = corridor_result
+    py = gpd.read_file(gpkg, layer="pylons")
+    assert set(py.columns) >= {"height_m", "n_spans", "line_heading_deg", "n_points"}
+    assert py.geometry.has_z.all()
+    found = np.column_stack([py.geometry.x, py.geometry.y])
+    true_xy = np.array([[p["x"], p["y"]] for p in truth["pylons"]])
+    d_false = np.min(np.hypot(*(found[:, None, :] - true_xy[None, :, :]).transpose(2, 0, 1)), axis=1)
+    assert (d_false <= 2.0).all(), d_false  # none false
+    d_true = np.min(np.hypot(*(true_xy[:, None, :] - found[None, :, :]).transpose(2, 0, 1)), axis=1)
+    assert (d_true <= 2.0).sum() >= 9, d_true
+    for p, dd in zip(truth["pylons"], d_true):  # heights and bases where found
+        if dd <= 2.0:
+            k = int(np.argmin(np.hypot(found[:, 0] - p["x"], found[:, 1] - p["y"])))
+            assert abs(py.height_m[k] - p["height_m"]) <= 1.0
+            assert abs(py.geometry.z[k] - p["z"]) <= 0.3
+    cls = np.asarray(laspy.read(wires).classification)
+    assert rep["stats"]["n_tower_points"] == int((cls == 15).sum()) > 0
+    true_tower = np.asarray(laspy.read(corridor).classification) == 15
+    assert (true_tower & (cls == 15)).sum() / (cls == 15).sum() >= 0.9  # tower points are tower points
+
+
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")
@@ -373,15 +398,24 @@ def _ahn4_real(name, tmp_path):
 @pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.97), ("12AN2_20", 0.92)])
 def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (12AN2_20's
-    sparse earth wires on top are the misses left: see the issue notes)."""
+    sparse earth wires on top are the misses left: see the issue notes), and the tile's one tower
+    (the producer's class 15) found within 2 m, nothing else taken for one."""
     path, sub = _ahn4_real(name, tmp_path)
     rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992",
                       outputs={"classified": str(tmp_path / "w.laz")})
     assert rep["stats"]["cell_size_m_used"] == pytest.approx(0.133)  # reported
     truth = np.asarray(sub.classification) == 14
-    pred = laspy.read(tmp_path / "w.laz").classification == 14
+    out = laspy.read(tmp_path / "w.laz").classification
+    pred = out == 14
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
     assert precision >= 0.97 and recall >= min_recall, (precision, recall)
+    tower = np.asarray(sub.classification) == 15
+    tx, ty = np.asarray(sub.x)[tower], np.asarray(sub.y)[tower]
+    py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
+    assert len(py) == 1
+    assert np.hypot(py.geometry.x[0] - 0.5 * (tx.min() + tx.max()), py.geometry.y[0] - 0.5 * (ty.min() + ty.max())) <= 2.0
+    t15 = out == 15
+    assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):

@@ -507,3 +507,144 @@ def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float, slop
             if root(i[4]) == r:
                 wire_of[i[4]] = w
     return wire_of
+
+
+@dataclass
+class Pylon:
+    x: float
+    y: float
+    height_m: float
+    n_spans: int
+    heading_deg: float
+    cells: np.ndarray  # flat indices (on the search grid) of the tower's footprint
+
+
+def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
+                reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
+                end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
+                max_rugged: float = 0.7, min_slenderness: float = 2.0):
+    """Towers that carry the conductors: tall structures under the lines where spans end.
+
+    x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
+    span_ends: (n, 2) plan positions where 3D spans end, span_end_hag their heights above
+    ground; lines_xy: [(a, b)] the 2D conductor segments and line_headings their headings
+    (degrees, counter-clockwise from east, 0-180).
+
+    On a ``cell_m`` grid of the points within ``reach_m`` of a conductor line, a cell is *tall*
+    when its highest point reaches ``top_share`` of the highest span end within ``end_radius_m``
+    (a tower stands as high as its attachments; a tree with no span ending at it is never tall,
+    nor is a pole measured against another line's wires passing over it), and a *column* when
+    its points fill at least ``column_share`` of the 1 m layers from its top down to 3 m above
+    ground (a lattice or a pole, not an arm or a crown). Tall cells join into candidates (8-
+    connected); a candidate with a column, at most ``max_side_m`` across, where at least
+    ``min_ends`` and more spans end (within ``end_radius_m`` of its body, or its arms' reach)
+    than run past it (``span_lines``: each span's plan segment) is a tower: wires end at towers
+    and pass trees. Tiles cut spans at their edges, where no tower stands: that is what the
+    column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
+    ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
+    the square root of its footprint, arms included). The base is the middle of the column
+    cells (the body; the arms reach out across the line).
+    """
+    from scipy import ndimage
+
+    if len(x) == 0 or len(span_ends) == 0:
+        return []
+    near = np.zeros(len(x), bool)
+    for (a, b) in lines_xy:
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        d = b - a
+        L2 = float(d @ d) or 1.0
+        t = np.clip(((x - a[0]) * d[0] + (y - a[1]) * d[1]) / L2, 0.0, 1.0)
+        near |= np.hypot(x - a[0] - t * d[0], y - a[1] - t * d[1]) <= reach_m
+    if not near.any():
+        return []
+    x, y, hag = x[near], y[near], hag[near]
+    x0, y0 = x.min(), y.min()
+    c = ((x - x0) / cell_m).astype(np.int64)
+    r = ((y - y0) / cell_m).astype(np.int64)
+    rows, cols = int(r.max()) + 1, int(c.max()) + 1
+    flat = r * cols + c
+    top = np.full(rows * cols, -np.inf)
+    np.maximum.at(top, flat, hag)
+    layer = np.floor(hag).astype(np.int64)
+    occupied = np.unique(flat * 4096 + np.clip(layer, 0, 4095))  # distinct (cell, 1 m layer)
+    low = (occupied % 4096) >= 3
+    n_layers = np.bincount(occupied[low] // 4096, minlength=rows * cols)
+    centres = np.column_stack([x0 + (np.arange(rows * cols) % cols + 0.5) * cell_m,
+                               y0 + (np.arange(rows * cols) // cols + 0.5) * cell_m])
+    has = np.isfinite(top)
+    wire_top = np.zeros(rows * cols)
+    span_end_hag = np.asarray(span_end_hag, float)
+    ends = cKDTree(np.asarray(span_ends, float))
+    idx = np.flatnonzero(has)
+    for i, nb in zip(idx, ends.query_ball_point(centres[idx], end_radius_m)):
+        if nb:
+            wire_top[i] = float(np.max(span_end_hag[nb]))
+    tall = has & (wire_top > 0) & (top >= top_share * wire_top)
+    column = tall & (n_layers >= column_share * np.maximum(top - 3.0, 1.0))
+    lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
+    lab = lab.ravel()
+    found = []
+    for k in range(1, n + 1):
+        cells = np.flatnonzero(lab == k)
+        if not column[cells].any():
+            continue
+        pc = centres[cells]
+        if np.ptp(pc[:, 0]) + cell_m > max_side_m or np.ptp(pc[:, 1]) + cell_m > max_side_m:
+            continue
+        body = centres[cells[column[cells]]]
+        cx, cy = 0.5 * (body[:, 0].min() + body[:, 0].max()), 0.5 * (body[:, 1].min() + body[:, 1].max())
+        arm = 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m  # how far out the wires may hang
+        n_ends = len(ends.query_ball_point([cx, cy], max(end_radius_m, arm)))
+        if n_ends < min_ends:
+            continue
+        if span_lines is not None:
+            n_past = sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m))
+            if n_past >= n_ends:
+                continue
+        height = float(top[cells].max())
+        if height < min_slenderness * np.sqrt(len(cells) * cell_m * cell_m):
+            continue
+        mine = np.flatnonzero(np.isin(flat, cells))
+        if len(mine) >= 4:
+            xyz = np.column_stack([x[mine], y[mine], hag[mine]])
+            _, _, rugged = shape_classes(xyz - xyz.min(axis=0))
+            if rugged.mean() > max_rugged:
+                continue
+        dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
+        found.append(Pylon(float(cx), float(cy), height, int(n_ends),
+                           float(line_headings[int(np.argmin(dist))]), cells))
+    _grid = (x0, y0, cell_m, rows, cols)
+    for p in found:
+        p.grid = _grid
+    return found
+
+
+def pylon_points(p: Pylon, x, y):
+    """Points inside the tower's footprint cells (on the grid it was found on)."""
+    x0, y0, cell_m, rows, cols = p.grid
+    c = np.floor((x - x0) / cell_m).astype(np.int64)
+    r = np.floor((y - y0) / cell_m).astype(np.int64)
+    ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
+    inside = np.zeros(len(x), bool)
+    inside[ok] = np.isin(r[ok] * cols + c[ok], p.cells)
+    return inside
+
+
+def _passes(px, py, a, b, reach, margin):
+    """Whether the segment a-b runs past (px, py) within ``reach`` with both its ends more than
+    ``margin`` away along it."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    L = float(np.hypot(*d))
+    if L <= 2 * margin:
+        return False
+    t = ((px - a[0]) * d[0] + (py - a[1]) * d[1]) / L
+    return margin < t < L - margin and abs((px - a[0]) * d[1] - (py - a[1]) * d[0]) / L <= reach
+
+
+def _point_segment_distance(px, py, a, b):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    t = float(np.clip(((px - a[0]) * d[0] + (py - a[1]) * d[1]) / max(float(d @ d), 1e-12), 0.0, 1.0))
+    return float(np.hypot(px - a[0] - t * d[0], py - a[1] - t * d[1]))

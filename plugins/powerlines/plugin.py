@@ -136,12 +136,17 @@ def _run(inputs, params, ctx):
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
+    # 6. pylons: tall columns under the lines where spans end
+    t = time.perf_counter()
+    pylons, tower_pt = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params)
+    timings["pylons_s"] = time.perf_counter() - t
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
-              "crossings": lines["crossings"], "conductors_3d": c3d}
+              "crossings": lines["crossings"], "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
     if ctx.wants("classified"):
         cls = np.asarray(ground_cls).copy()
         cls[cls != 2] = 1
+        cls[tower_pt] = 15
         cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
     if len(cond) == 0 and len(keep) >= 200 and len(th) < 0.15 * len(keep):
@@ -154,8 +159,51 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
              "height_max_m_used": round(h_max, 2), "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
+             "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
+
+
+def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params):
+    """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points."""
+    import geopandas as gpd
+    import numpy as np
+    from shapely.geometry import Point
+
+    from .core import find_pylons, pylon_points
+
+    off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
+    from .core import catenary
+
+    ends, end_z, span_lines = [], [], []
+    for sp in spans:
+        a, d, _, _ = geo[sp.conductor]
+        normal = np.array([-d[1], d[0]])
+        e = [a + s_ * d + (sp.offset + sp.offset_slope * s_) * normal for s_ in (sp.s_from, sp.s_to)]
+        ends += e
+        end_z += [catenary(s_, sp.z0, sp.s0, sp.c) for s_ in (sp.s_from, sp.s_to)]
+        span_lines.append(tuple(e))
+    ends = np.asarray(ends, float).reshape(-1, 2)
+    ground_z = dtm.sample(ends[:, 0] / hu, ends[:, 1] / hu) * vu if len(ends) else np.zeros(0)
+    lines_xy = [(np.array(g.coords[0]) * hu, np.array(g.coords[-1]) * hu) for g in cond.geometry]
+    headings = [float(np.degrees(np.arctan2(b[1] - a[1], b[0] - a[0])) % 180.0) for a, b in lines_xy]
+    found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
+                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines)
+    tower = np.zeros(len(pc), bool)
+    cand = np.flatnonzero(np.isfinite(hag) & (hag >= 0.5) & (conductor_of < 0) & (ground_cls != 2))
+    rows, geoms = [], []
+    for i, p in enumerate(found):
+        inside = pylon_points(p, pc.x[cand] * hu, pc.y[cand] * hu)
+        tower[cand[inside]] = True
+        x, y = p.x / hu, p.y / hu
+        z = float(dtm.sample(np.array([x]), np.array([y]))[0])
+        geoms.append(Point(x, y, z))
+        rows.append({"pylon": i, "height_m": round(p.height_m, 2), "n_spans": p.n_spans,
+                     "line_heading_deg": round(p.heading_deg, 2), "n_points": int(inside.sum())})
+    gdf = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
+        {"pylon": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+    gdf.attrs["geometry_type"] = "Point Z"
+    return gdf, tower
 
 
 def _select_conductors(lines: dict, keep: list) -> dict:
@@ -186,7 +234,9 @@ def toolbox_algorithms():
             "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
             "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
-            "per span. GeoPackage layers conductors, conductor_segments, crossings, conductors_3d."),
+            "per span; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
+            "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
+            "conductors_3d, pylons."),
         reference=REFERENCE,
         parameters=[
             Parameter("ground", str, "filter", "ground from the morphological filter or the file's class 2",
@@ -227,6 +277,8 @@ def toolbox_algorithms():
             Parameter("validate_3d", bool, True, "keep only conductors that are wires in 3D (a catenary span of at "
                       "least S_min with a small residual and gentle slope)"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
+            Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
+                      "spans ending at it are attached", minimum=0.1, maximum=2.0),
             Parameter("band_3d_m", float, 1.0, "half-width of the band around a 2D line whose points the 3D step "
                       "splits into wires by height (conductors side by side at other heights are caught too)",
                       unit="m", minimum=0.05, maximum=10.0),
@@ -234,8 +286,9 @@ def toolbox_algorithms():
         inputs=[Input("points", "points", "raw LAS/LAZ point cloud",
                       dims=("classification", "return_number", "number_of_returns"))],
         outputs=[
-            Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d"),
-            Output("classified", "points", "the input with the detected wire points as class 14", optional=True,
+            Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d, pylons"),
+            Output("classified", "points", "the input with the detected wire points as class 14 and tower points "
+                   "as 15", optional=True,
                    suffix="_wires"),
         ],
     )]
