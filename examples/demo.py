@@ -132,6 +132,12 @@ def main(argv=None) -> int:
         summary["crossing error max m"] = round(max(errs), 3) if errs else None
         summary["wire points precision / recall"] = (f"{(wires & tw).sum() / max(wires.sum(), 1):.3f} / "
                                                      f"{(wires & tw).sum() / max(tw.sum(), 1):.3f}")
+        pyl = gpd.read_file(out / "powerlines.gpkg", layer="pylons")
+        near = [float(np.min(np.hypot(pyl.geometry.x - p["x"], pyl.geometry.y - p["y"]))) if len(pyl) else np.inf
+                for p in truth["pylons"]]
+        false = sum(float(np.min([np.hypot(x - p["x"], y - p["y"]) for p in truth["pylons"]])) > 2.0
+                    for x, y in zip(pyl.geometry.x, pyl.geometry.y))
+        summary["pylons found within 2 m"] = f"{sum(d <= 2.0 for d in near)}/{len(near)} (+{false} false)"
         summary["powerlines s per million points"] = round(rep["timings_s"]["total"] / len(truth_cls) * 1e6, 2)
     if "powerlines" in report["algorithms_run"]:  # its stages ran through the host
         report["algorithms_run"] += [a for a in ("tophat", "hough-lines") if a in algs]
