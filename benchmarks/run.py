@@ -429,6 +429,9 @@ def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
     if not path.exists():
         toolbox.run("synthetic-scene", output=path, overwrite=True, kind="corridor", seed=1)
     cases.append(("synthetic corridor", path, {}))
+    rib = tmp / "ribbon.laz"  # a compact line: three phases 0.6 m apart at one height, crossed above
+    toolbox.run("synthetic-scene", output=rib, overwrite=True, kind="corridor", seed=1, line_variant="ribbon")
+    cases.append(("synthetic ribbon corridor", rib, {}))
     if large:
         big = tmp / "corridor_3km.laz"
         toolbox.run("synthetic-scene", output=big, overwrite=True, kind="corridor", seed=1, width_m=3000.0)

@@ -346,6 +346,51 @@ def test_pylons_on_the_synthetic_corridor(corridor, corridor_result):
     assert (true_tower & (cls == 15)).sum() / (cls == 15).sum() >= 0.9  # tower points are tower points
 
 
+def test_ribbons_are_wires_not_roofs():
+    """Three lines 0.6 m apart (a ribbon of phases), locally flat like a roof; a cross arm joins
+    them at one end. A roof strip of the same size and density is no ribbon."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines.core import ribbons
+
+    rng = np.random.default_rng(3)
+    s = rng.uniform(0, 60, 3 * 200)
+    off = np.repeat([-0.6, 0.0, 0.6], 200) + rng.normal(0, 0.03, 600)
+    arm = np.column_stack([np.zeros(30), rng.uniform(-0.9, 0.9, 30)])
+    wires = np.column_stack([np.r_[s, arm[:, 0]], np.r_[off, arm[:, 1]], 11 + rng.normal(0, 0.03, 630)])
+    roof = np.column_stack([rng.uniform(0, 60, 1000), rng.uniform(-0.9, 0.9, 1000), 8 + rng.normal(0, 0.03, 1000)])
+    roof[:, 1] += 30.0
+    xyz = np.r_[wires, roof]
+    dist, idx = cKDTree(xyz).query(xyz, k=12)
+    flat = np.ones(len(xyz), bool)
+    r = ribbons(xyz, idx, dist, flat, flat)
+    assert r[:600].all() and not r[630:].any()
+
+
+def test_ribbon_corridor_at_default_parameters(tmp_path):
+    """The compact line (three phases 0.6 m apart at one height, 11 m up) crossed above by two
+    conductors: every conductor found once, none false, and its wire points."""
+    path = tmp_path / "ribbon.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="ribbon", seed=1)
+    truth = json.loads(path.with_name("ribbon_truth.json").read_text())
+    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    found = set()
+    for g in cond.geometry:
+        (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+        d = np.array([bx - ax, by - ay]) / g.length
+        for k, t in enumerate(truth["conductor_lines_2d"]):
+            a, b = np.array(t["a"]), np.array(t["b"])
+            td = (b - a) / np.linalg.norm(b - a)
+            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                found.add(k)
+    assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
+    t14 = np.asarray(laspy.read(path).classification) == 14
+    p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.88
+    assert rep["stats"]["n_pylons"] >= 10
+
+
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")

@@ -186,6 +186,28 @@ def test_bundles_and_stacked_conductors(corridor):
     assert all(1.0 < sp["sag_m"] < 6.0 for sp in spans if sp["line"] == "A")
 
 
+def test_ribbon_variant_has_phases_side_by_side_at_one_height():
+    s = make_scene("corridor", seed=2, density_ppm2=4.0, line_variant="ribbon", phase_spacing_m=0.8)
+    a = [w for w in s.truth["wires"] if w["line"] == "A"]
+    assert sorted(round(w["offset_m"], 6) for w in a) == [-0.8, 0.0, 0.8]
+    obj, wire = s.fields["object_id"], s.fields["classification"] == 14
+    # at mid-span the three phases hang at one height (same attachments, same tension)
+    span = [sp for sp in s.truth["spans"] if sp["line"] == "A"]
+    assert len(span) >= 3 * 5
+    heights = {}
+    for sp in span:
+        heights.setdefault(sp["span"], []).append(sp["sag_m"])
+    assert all(np.ptp(v) < 0.05 for v in heights.values())
+    for w in a:  # every phase is sampled along its whole length, 11 m up (poles of 11.5 m)
+        m = wire & (obj == w["id"])
+        assert m.sum() > 300
+    assert {l["line"] for l in s.truth["conductor_lines_2d"]} == {"A", "B"}
+    assert len(s.truth["crossings"]) == 6
+    assert all(28 < c["angle_deg"] < 42 for c in s.truth["crossings"])
+    with pytest.raises(ValueError):
+        make_scene("corridor", seed=2, line_variant="nonsense")
+
+
 def test_truth_geopackage_layers(tmp_path):
     import geopandas as gpd
 

@@ -76,6 +76,8 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
             p = np.flatnonzero(mask)
             if len(p):
                 mask[p] = dist[p, need - 1] <= 1.0 if need <= n else False
+    if planar.any():
+        planar &= ~ribbons(xyz, idx, dist, planar, ~rugged)
     linear = ~rugged & ~planar
     # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
     li = np.flatnonzero(linear)
@@ -94,6 +96,39 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
                 touches[open_] = np.isfinite(d)
             linear[li[touches]] = False
     return linear, planar, rugged
+
+
+def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.05, max_band_m: float = 0.4,
+            min_points: int = 20, floor_share: float = 0.05):
+    """Planar points that belong to a ribbon of wires side by side (a compact line's phases, a
+    bundle): locally flat like a roof, but the set they form (with the ``smooth`` points linked
+    to them within ``link``, through the k-neighbourhoods ``idx``/``dist``), projected across its
+    main axis in plan, falls into two or more bands no wider than ``max_band_m`` with empty space
+    between them, where a roof fills its width. Bins holding under ``floor_share`` of the fullest
+    bin count as empty (a cross arm or an insulator joins the wires at a pole)."""
+    n = len(xyz)
+    ok = (dist < link) & np.r_[smooth, False][idx] & smooth[:, None]
+    rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
+    cols = idx.ravel()[ok.ravel()]
+    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    n_comp, lab = connected_components(g, directed=False)
+    out = np.zeros(n, bool)
+    lab = np.where(smooth, lab, -1)
+    for k in np.unique(lab[planar]):
+        m = np.flatnonzero(lab == k)
+        if len(m) < min_points:
+            continue
+        p = xyz[m, :2] - xyz[m, :2].mean(axis=0)
+        _, _, vt = np.linalg.svd(p, full_matrices=False)
+        across = p @ vt[1]
+        counts = np.bincount(((across - across.min()) / bin_m).astype(np.int64))
+        full = counts >= floor_share * counts.max()
+        # runs of full bins: their widths, and whether there are at least two
+        edges = np.flatnonzero(np.diff(np.r_[0, full.astype(np.int8), 0]))
+        widths = (edges[1::2] - edges[::2]) * bin_m
+        if len(widths) >= 2 and widths.max() <= max_band_m:
+            out[m] = True
+    return out & planar
 
 
 @dataclass

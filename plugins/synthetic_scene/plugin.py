@@ -35,7 +35,8 @@ def _run(inputs, params, ctx):
     if not crs.is_projected:
         raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
     scene = make_scene(params["kind"], params["seed"], params["density_ppm2"], params["noise_m"], W, H,
-                       params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"])
+                       params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"],
+                       line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -82,6 +83,12 @@ def toolbox_algorithms():
             Parameter("origin_x", float, 512000.0, "easting of the south-west corner", unit="m"),
             Parameter("origin_y", float, 5403000.0, "northing of the south-west corner", unit="m"),
             Parameter("crs", str, "EPSG:25832", "projected CRS (metres) of the coordinates"),
+            Parameter("line_variant", str, "double-circuit", "corridor: the power lines (double-circuit: a lattice "
+                      "transmission line with bundled phases and an earth wire, crossed by a distribution line on "
+                      "poles; ribbon: a compact line, its three phases side by side at one height, crossed above "
+                      "by two conductors)", choices=("double-circuit", "ribbon")),
+            Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
+                      minimum=0.2, maximum=3.0),
         ],
         inputs=[],
         outputs=[

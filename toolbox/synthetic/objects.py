@@ -272,6 +272,15 @@ def wood_pole(height_m=11.0, arm_half_m=1.4) -> TowerModel:
     return TowerModel("pole", np.array(segs, float), att, height_m)
 
 
+def compact_pole(height_m=11.0, phases=3, spacing_m=0.6) -> TowerModel:
+    """A compact line's pole: one horizontal arm carrying ``phases`` conductors ``spacing_m``
+    apart at one height (a horizontal ribbon of wires)."""
+    half = 0.5 * (phases - 1) * spacing_m + 0.3
+    segs = [((0, 0, 0), (0, 0, height_m + 0.5)), ((-half, 0, height_m), (half, 0, height_m))]
+    att = {f"P{i}": ((i - 0.5 * (phases - 1)) * spacing_m, height_m - 0.3) for i in range(phases)}
+    return TowerModel("compact", np.array(segs, float), att, height_m + 0.5)
+
+
 def sample_segments(segments: np.ndarray, spacing_m: float, rng, keep: float = 1.0):
     """Points along 3D segments at about ``spacing_m`` (jittered), each kept with prob. ``keep``."""
     out = []

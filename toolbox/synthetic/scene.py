@@ -76,9 +76,13 @@ class _Points:
         return {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
 
 
+LINE_VARIANTS = ("double-circuit", "ribbon")
+
+
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
                width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
-               origin=(512000.0, 5403000.0), crs: str = "EPSG:25832") -> Scene:
+               origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
+               phase_spacing_m: float = 0.6) -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
     W, H = DEFAULT_EXTENT[kind]
@@ -90,7 +94,14 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         terrain.hills = [(h[0], h[1], h[2] * 0.3, h[3] * 1.5) for h in terrain.hills]
     truth: dict = {"buildings": [], "roof_planes": [], "trees": [], "pylons": [], "wires": [], "spans": [],
                    "conductor_lines_2d": [], "crossings": [], "water": None, "bridge": None}
-    lines = _power_lines(kind, W, H, rng, terrain) if kind == "corridor" else []
+    if line_variant not in LINE_VARIANTS:
+        raise ValueError(f"line_variant must be one of {LINE_VARIANTS}")
+    if kind != "corridor":
+        lines = []
+    elif line_variant == "ribbon":
+        lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
+    else:
+        lines = _power_lines(kind, W, H, rng, terrain)
     buildings = _place_buildings(kind, W, H, rng, terrain, lines)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
 
@@ -316,6 +327,41 @@ def _power_lines(kind, W, H, rng, terrain):
                   "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 700.0} for a in ("L", "C", "R")],
                   "voltage_kv": 20})
     return lines
+
+
+def _ribbon_lines(W, H, rng, terrain, spacing_m):
+    """Line A: a compact three-phase line, its phases side by side ``spacing_m`` apart at one
+    height about 11 m over the ground (a horizontal ribbon of wires). Line B: two conductors on
+    taller poles crossing above it at 30-40 degrees."""
+    from .objects import compact_pole
+
+    ang_a = np.radians(rng.uniform(3, 8))
+    a0 = np.array([-20.0, 0.45 * H - 0.5 * W * np.tan(ang_a)])
+    dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
+    model = compact_pole(11.0, 3, spacing_m)
+    poles_a = _poles_along(a0, dir_a, 30.0, 75.0, W, H, terrain)
+    wires_a = [{"attach": f"P{i}", "dx": 0.0, "kind": "phase", "c": 900.0} for i in range(3)]
+    ang_b = ang_a + np.radians(rng.uniform(30, 40))
+    mid = a0 + dir_a * (0.5 * W / np.cos(ang_a) + 20.0)
+    dir_b = np.array([np.cos(ang_b), np.sin(ang_b)])
+    start_b = mid - dir_b * 300.0
+    poles_b = _poles_along(start_b, dir_b, 35.0, 80.0, W, H, terrain)
+    return [{"name": "A", "model": model, "towers": poles_a, "dir": dir_a, "wires": wires_a, "voltage_kv": 20},
+            {"name": "B", "model": wood_pole(16.0, 2.0), "towers": poles_b, "dir": dir_b,
+             "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 800.0} for a in ("L", "R")], "voltage_kv": 20}]
+
+
+def _poles_along(start, direction, first_m, span_m, W, H, terrain):
+    """Poles every ``span_m`` along a line, inside the scene, moved along it off excluded ground
+    (the ditch, the pond, the embankment)."""
+    poles = []
+    for k in range(0, 40):
+        for shift in (0.0, 6.0, -6.0, 12.0, -12.0):
+            p = start + direction * (first_m + span_m * k + shift)
+            if 5 < p[0] < W - 5 and 5 < p[1] < H - 5 and not terrain.excluded(p[0], p[1], 1.0):
+                poles.append(p)
+                break
+    return poles
 
 
 def _line_distance(u, v, line):
