@@ -346,6 +346,23 @@ def test_pylons_on_the_synthetic_corridor(corridor, corridor_result):
     assert (true_tower & (cls == 15)).sum() / (cls == 15).sum() >= 0.9  # tower points are tower points
 
 
+def test_crossings_average_only_where_lines_meet():
+    """Three lines through one point give one crossing (the method's mean); one line across three
+    parallel lines 0.6 m apart gives three (they meet it, not each other)."""
+    def line(p, ang_deg):
+        d = np.array([np.cos(np.radians(ang_deg)), np.sin(np.radians(ang_deg))])
+        p = np.asarray(p, float)
+        return (p, d), [(p - 50 * d, p + 50 * d)]
+
+    star = [line((0, 0), a) for a in (0, 40, 100)]
+    c = hough.crossings([l for l, _ in star], [s for _, s in star])
+    assert len(c) == 1 and c[0]["n_lines"] == 3 and np.hypot(c[0]["x"], c[0]["y"]) < 1e-9
+    ribbon = [line((0, off), 0) for off in (-0.6, 0.0, 0.6)] + [line((0, 0), 35)]
+    c = hough.crossings([l for l, _ in ribbon], [s for _, s in ribbon])
+    assert len(c) == 3 and all(x["n_lines"] == 2 for x in c)
+    assert sorted(round(x["y"], 6) for x in c) == [-0.6, 0.0, 0.6]
+
+
 def test_ribbons_are_wires_not_roofs():
     """Three lines 0.6 m apart (a ribbon of phases), locally flat like a roof; a cross arm joins
     them at one end. A roof strip of the same size and density is no ribbon."""
@@ -389,6 +406,10 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.88
     assert rep["stats"]["n_pylons"] >= 10
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    assert len(cr) == len(truth["crossings"]) == 6  # line B over each phase: not averaged into one
+    for c in truth["crossings"]:
+        assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
 
 
 def test_crossings_within_5_cm_of_truth(corridor_result):

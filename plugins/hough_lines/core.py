@@ -205,7 +205,8 @@ def intersect(p1, d1, p2, d2):
 def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, merge_m: float = 1.0):
     """Crossings of conductor lines (the method's §5): pairwise intersections of the fitted lines,
     kept where some pair of validated segments (each extended by ``extend_m``) also intersects
-    within ``tolerance_m``; crossings closer than ``merge_m`` are averaged.
+    within ``tolerance_m``; where several lines meet (every pair of them crossing within ``merge_m``)
+    their crossings are averaged.
 
     ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). Returns a list of
     dicts (x, y, n_lines, angle_deg, lines).
@@ -232,7 +233,15 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
             if ok:
                 cosang = abs(float(np.dot(lines[i][1], lines[j][1])))
                 found.append((p, {i, j}, float(np.degrees(np.arccos(min(cosang, 1.0))))))
-    # where several lines meet, or tiles repeat a crossing: the mean
+    # where several lines meet: the mean. Lines meet at one point when each pair of them crosses
+    # there; crossings of one line with parallel lines side by side (a ribbon of phases) stay apart
+    at = {frozenset(f[1]): f[0] for f in found}
+
+    def meet(lines_, point):
+        ids = sorted(lines_)
+        return all(frozenset((u, v)) in at and np.linalg.norm(at[frozenset((u, v))] - point) <= merge_m
+                   for k, u in enumerate(ids) for v in ids[k + 1:])
+
     merged = []
     used = [False] * len(found)
     for a in range(len(found)):
@@ -240,9 +249,12 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
             continue
         group = [a]
         used[a] = True
+        members = set(found[a][1])
         for b in range(a + 1, len(found)):
-            if not used[b] and np.linalg.norm(found[b][0] - found[a][0]) <= merge_m:
+            if not used[b] and np.linalg.norm(found[b][0] - found[a][0]) <= merge_m and \
+                    meet(members | found[b][1], found[a][0]):
                 group.append(b)
+                members |= found[b][1]
                 used[b] = True
         pts = np.array([found[g][0] for g in group])
         ids = set().union(*[found[g][1] for g in group])
