@@ -572,8 +572,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     its points fill at least ``column_share`` of the 1 m layers from its top down to 3 m above
     ground (a lattice or a pole, not an arm or a crown). Tall cells join into candidates (8-
     connected); a candidate with a column, at most ``max_side_m`` across, where at least
-    ``min_ends`` and more spans end (within ``end_radius_m`` of its body, or its arms' reach)
-    than run past it (``span_lines``: each span's plan segment) is a tower: wires end at towers
+    ``min_ends`` and more spans end (within ``end_radius_m`` of its body, or its arms' reach; a
+    span end counts for the nearest candidate only) than run past it (``span_lines``: each span's plan segment) is a tower: wires end at towers
     and pass trees. Tiles cut spans at their edges, where no tower stands: that is what the
     column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
     ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
@@ -616,10 +616,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         if nb:
             wire_top[i] = float(np.max(span_end_hag[nb]))
     tall = has & (wire_top > 0) & (top >= top_share * wire_top)
-    column = tall & (n_layers >= column_share * np.maximum(top - 3.0, 1.0))
+    column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
     lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
     lab = lab.ravel()
-    found = []
+    shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
     for k in range(1, n + 1):
         cells = np.flatnonzero(lab == k)
         if not column[cells].any():
@@ -627,16 +627,6 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         pc = centres[cells]
         if np.ptp(pc[:, 0]) + cell_m > max_side_m or np.ptp(pc[:, 1]) + cell_m > max_side_m:
             continue
-        body = centres[cells[column[cells]]]
-        cx, cy = 0.5 * (body[:, 0].min() + body[:, 0].max()), 0.5 * (body[:, 1].min() + body[:, 1].max())
-        arm = 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m  # how far out the wires may hang
-        n_ends = len(ends.query_ball_point([cx, cy], max(end_radius_m, arm)))
-        if n_ends < min_ends:
-            continue
-        if span_lines is not None:
-            n_past = sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m))
-            if n_past >= n_ends:
-                continue
         height = float(top[cells].max())
         if height < min_slenderness * np.sqrt(len(cells) * cell_m * cell_m):
             continue
@@ -646,9 +636,30 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             _, _, rugged = shape_classes(xyz - xyz.min(axis=0))
             if rugged.mean() > max_rugged:
                 continue
+        body = centres[cells[column[cells]]]
+        centre = np.array([0.5 * (body[:, 0].min() + body[:, 0].max()), 0.5 * (body[:, 1].min() + body[:, 1].max())])
+        arm = 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m  # how far out the wires may hang
+        shaped.append((cells, centre, arm, height))
+    if not shaped:
+        return []
+    # each span end belongs to the nearest candidate that reaches it (a tree beside a pole does
+    # not count the pole's span ends)
+    cxy = np.array([c for _, c, _, _ in shaped])
+    reach = np.array([max(end_radius_m, a) for _, _, a, _ in shaped])
+    d_end = np.hypot(*(np.asarray(span_ends, float)[:, None, :] - cxy[None, :, :]).transpose(2, 0, 1))
+    d_end = np.where(d_end <= reach[None, :], d_end, np.inf)
+    owner = np.where(np.isfinite(d_end.min(axis=1)), d_end.argmin(axis=1), -1)
+    found = []
+    for k, (cells, (cx, cy), arm, height) in enumerate(shaped):
+        n_ends = int(np.sum(owner == k))
+        if n_ends < min_ends:
+            continue
+        if span_lines is not None:
+            n_past = sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m))
+            if n_past >= n_ends:
+                continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
-        found.append(Pylon(float(cx), float(cy), height, int(n_ends),
-                           float(line_headings[int(np.argmin(dist))]), cells))
+        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), cells))
     _grid = (x0, y0, cell_m, rows, cols)
     for p in found:
         p.grid = _grid
