@@ -208,6 +208,22 @@ def test_ribbon_variant_has_phases_side_by_side_at_one_height():
         make_scene("corridor", seed=2, line_variant="nonsense")
 
 
+@pytest.mark.parametrize("n, shape", [(1, "single"), (3, "triangle"), (4, "square")])
+def test_bundle_variants(n, shape):
+    s = make_scene("corridor", seed=3, density_ppm2=3.0, bundle=n, bundle_spacing_m=0.4)
+    phases = [w for w in s.truth["wires"] if w["line"] == "A" and w["kind"] == "phase"]
+    assert len(phases) == 4 * n
+    arm = [w for w in phases if w["attach"] == "arm0_L"]
+    pts = sorted((round(w["offset_m"] - np.mean([v["offset_m"] for v in arm]), 3), round(w["dz_m"], 3)) for w in arm)
+    if shape == "triangle":  # two below 0.4 m apart, one above them
+        assert pts == [(-0.2, 0.0), (0.0, round(0.4 * np.sqrt(3) / 2, 3)), (0.2, 0.0)]
+    if shape == "square":
+        assert pts == [(-0.2, 0.0), (-0.2, 0.4), (0.2, 0.0), (0.2, 0.4)]
+    # sub-conductors stacked in plan share one 2D line: one per distinct plan offset
+    offsets = {round(w["offset_m"], 3) for w in s.truth["wires"] if w["line"] == "A"}
+    assert len([l for l in s.truth["conductor_lines_2d"] if l["line"] == "A"]) == len(offsets)
+
+
 def test_truth_geopackage_layers(tmp_path):
     import geopandas as gpd
 

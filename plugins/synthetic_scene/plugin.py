@@ -36,7 +36,8 @@ def _run(inputs, params, ctx):
         raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
     scene = make_scene(params["kind"], params["seed"], params["density_ppm2"], params["noise_m"], W, H,
                        params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"],
-                       line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"])
+                       line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"],
+                       bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -89,6 +90,10 @@ def toolbox_algorithms():
                       "by two conductors)", choices=("double-circuit", "ribbon")),
             Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
                       minimum=0.2, maximum=3.0),
+            Parameter("bundle", int, 2, "double-circuit: sub-conductors per phase (1; 2 side by side; 3 a "
+                      "triangle; 4 a square)", minimum=1, maximum=4),
+            Parameter("bundle_spacing_m", float, 0.6, "double-circuit: the distance between sub-conductors",
+                      unit="m", minimum=0.2, maximum=2.0),
         ],
         inputs=[],
         outputs=[

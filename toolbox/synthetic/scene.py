@@ -82,7 +82,7 @@ LINE_VARIANTS = ("double-circuit", "ribbon")
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
                width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
                origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
-               phase_spacing_m: float = 0.6) -> Scene:
+               phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6) -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
     W, H = DEFAULT_EXTENT[kind]
@@ -101,7 +101,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     elif line_variant == "ribbon":
         lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
     else:
-        lines = _power_lines(kind, W, H, rng, terrain)
+        lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m)
     buildings = _place_buildings(kind, W, H, rng, terrain, lines)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
 
@@ -293,10 +293,19 @@ def _gps_time(u, v, H):
 # layout
 # ------------------------------------------------------------------------------------------
 
-def _power_lines(kind, W, H, rng, terrain):
+def bundle_offsets(n: int, spacing_m: float):
+    """(across, up) offsets of the sub-conductors of a bundle of ``n``: side by side for 2, a
+    triangle (two below, one above) for 3, a square for 4 (as spacers hold them)."""
+    h = 0.5 * spacing_m
+    return {1: [(0.0, 0.0)], 2: [(-h, 0.0), (h, 0.0)],
+            3: [(-h, 0.0), (h, 0.0), (0.0, spacing_m * np.sqrt(3) / 2)],
+            4: [(-h, 0.0), (h, 0.0), (-h, spacing_m), (h, spacing_m)]}[n]
+
+
+def _power_lines(kind, W, H, rng, terrain, bundle: int = 2, bundle_spacing_m: float = 0.6):
     """Line A: a straight double-circuit transmission line across the scene (lattice towers,
-    bundled phases, an earth wire). Line B: a distribution line on wood poles crossing it at a
-    sharp angle, lower."""
+    phases in bundles of ``bundle`` sub-conductors ``bundle_spacing_m`` apart, an earth wire).
+    Line B: a distribution line on wood poles crossing it at a sharp angle, lower."""
     lines = []
     ang_a = np.radians(rng.uniform(3, 8))
     a0 = np.array([-40.0, 0.42 * H - 0.5 * W * np.tan(ang_a)])
@@ -307,8 +316,8 @@ def _power_lines(kind, W, H, rng, terrain):
     model = lattice_tower()
     wires = []
     for arm in ("arm0_L", "arm0_R", "arm1_L", "arm1_R"):
-        for sub in (-0.3, 0.3):  # bundle of two, 0.6 m apart
-            wires.append({"attach": arm, "dx": sub, "kind": "phase", "c": 1300.0})
+        for dx, dz in bundle_offsets(bundle, bundle_spacing_m):
+            wires.append({"attach": arm, "dx": dx, "dz": dz, "kind": "phase", "c": 1300.0})
     wires.append({"attach": "earth", "dx": 0.0, "kind": "earth", "c": 1600.0})
     lines.append({"name": "A", "model": model, "towers": towers, "dir": dir_a, "wires": wires, "voltage_kv": 110})
     # line B: crosses A at 20-30 degrees, near the middle of the scene
@@ -489,9 +498,9 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
         dx_att, z_att = model.attachments[w["attach"]]
         off = dx_att + w["dx"]
         ends = [np.asarray(t) + across * off for t in towers]
-        zs = [float(terrain.height(t[0], t[1])) + z_att for t in towers]
+        zs = [float(terrain.height(t[0], t[1])) + z_att + w.get("dz", 0.0) for t in towers]
         truth["wires"].append({"id": wid, "line": line["name"], "kind": w["kind"], "attach": w["attach"],
-                               "offset_m": float(off), "catenary_c_m": w["c"]})
+                               "offset_m": float(off), "dz_m": float(w.get("dz", 0.0)), "catenary_c_m": w["c"]})
         for si in range(len(towers) - 1):
             pa, pb = ends[si], ends[si + 1]
             L = float(np.hypot(*(pb - pa)))
