@@ -208,6 +208,26 @@ def test_ribbon_variant_has_phases_side_by_side_at_one_height():
         make_scene("corridor", seed=2, line_variant="nonsense")
 
 
+def test_distribution_variant_trees_under_and_beside_the_line():
+    s = make_scene("corridor", seed=4, density_ppm2=3.0, line_variant="distribution")
+    wires = s.truth["wires"]
+    assert sorted((w["line"], w["attach"]) for w in wires) == [("A", "C"), ("A", "L"), ("A", "R"), ("B", "L"),
+                                                               ("B", "R")]
+    a_pylons = [p for p in s.truth["pylons"] if p["line"] == "A"]
+    assert all(p["height_m"] == 9.0 for p in a_pylons) and len(a_pylons) >= 10
+    lines = {l["line"]: l for l in s.truth["conductor_lines_2d"]}
+    a, b = np.array(lines["A"]["a"]), np.array(lines["A"]["b"])
+    d = (b - a) / np.linalg.norm(b - a)
+    trees = s.truth["trees"]
+    lateral = np.array([abs((t["x"] - a[0]) * -d[1] + (t["y"] - a[1]) * d[0]) for t in trees])
+    height = np.array([t["top_z"] - t["ground_z"] for t in trees])
+    under = lateral < 2.0
+    assert under.sum() >= 3 and height[under].max() <= 6.0  # trimmed 2-3 m below the 8-9 m wires
+    beside = (lateral > 3.0) & (lateral < 9.0) & (height > 6.0)
+    assert beside.sum() >= 10  # the row beside the line, taller than its wires
+    assert all(55 < c["angle_deg"] < 85 for c in s.truth["crossings"])
+
+
 @pytest.mark.parametrize("n, shape", [(1, "single"), (3, "triangle"), (4, "square")])
 def test_bundle_variants(n, shape):
     s = make_scene("corridor", seed=3, density_ppm2=3.0, bundle=n, bundle_spacing_m=0.4)

@@ -87,7 +87,9 @@ def toolbox_algorithms():
             Parameter("line_variant", str, "double-circuit", "corridor: the power lines (double-circuit: a lattice "
                       "transmission line with bundled phases and an earth wire, crossed by a distribution line on "
                       "poles; ribbon: a compact line, its three phases side by side at one height, crossed above "
-                      "by two conductors)", choices=("double-circuit", "ribbon")),
+                      "by two conductors; distribution: three wires on 9 m poles with trees under and beside "
+                      "them, crossed by a two-wire low-voltage line on 7 m poles)",
+                      choices=("double-circuit", "ribbon", "distribution")),
             Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
                       minimum=0.2, maximum=3.0),
             Parameter("bundle", int, 2, "double-circuit: sub-conductors per phase (1; 2 side by side; 3 a "

@@ -76,7 +76,7 @@ class _Points:
         return {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
 
 
-LINE_VARIANTS = ("double-circuit", "ribbon")
+LINE_VARIANTS = ("double-circuit", "ribbon", "distribution")
 
 
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
@@ -100,6 +100,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         lines = []
     elif line_variant == "ribbon":
         lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
+    elif line_variant == "distribution":
+        lines = _distribution_lines(W, H, rng, terrain)
     else:
         lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m)
     buildings = _place_buildings(kind, W, H, rng, terrain, lines)
@@ -360,6 +362,25 @@ def _ribbon_lines(W, H, rng, terrain, spacing_m):
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 800.0} for a in ("L", "R")], "voltage_kv": 20}]
 
 
+def _distribution_lines(W, H, rng, terrain):
+    """Line A: a medium-voltage line, three wires on 9 m poles, spans of 40-50 m, trees trimmed
+    2-3 m below its wires and a row of trees beside it. Line B: a low-voltage line, two wires on
+    7 m poles, crossing it at 60-80 degrees."""
+    ang_a = np.radians(rng.uniform(3, 8))
+    a0 = np.array([-20.0, 0.45 * H - 0.5 * W * np.tan(ang_a)])
+    dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
+    poles_a = _poles_along(a0, dir_a, 25.0, rng.uniform(40.0, 50.0), W, H, terrain)
+    ang_b = ang_a + np.radians(rng.uniform(60, 80))
+    mid = a0 + dir_a * (0.5 * W / np.cos(ang_a) + 20.0)
+    dir_b = np.array([np.cos(ang_b), np.sin(ang_b)])
+    poles_b = _poles_along(mid - dir_b * 300.0, dir_b, 22.0, 40.0, W, H, terrain)
+    return [{"name": "A", "model": wood_pole(9.0, 1.4), "towers": poles_a, "dir": dir_a, "voltage_kv": 10,
+             "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 500.0} for a in ("L", "C", "R")],
+             "trim_m": (5.0, 6.0), "tree_row_m": (4.0, 8.0)},
+            {"name": "B", "model": wood_pole(7.0, 0.6), "towers": poles_b, "dir": dir_b, "voltage_kv": 0.4,
+             "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 400.0} for a in ("L", "R")]}]
+
+
 def _poles_along(start, direction, first_m, span_m, W, H, terrain):
     """Poles every ``span_m`` along a line, inside the scene, moved along it off excluded ground
     (the ditch, the pond, the embankment)."""
@@ -444,7 +465,14 @@ def _place_trees(kind, W, H, rng, terrain, buildings, lines):
     pos = centres[pick] + rng.normal(0, 22, (n_forest, 2))
     scattered = rng.uniform([0, 0], [W, H], (n_forest // 3, 2))
     bushes = rng.uniform([0, 0], [W, H], (n_bush, 2))
-    pos = np.vstack([pos, scattered, bushes])
+    rows = []
+    for line in lines:  # a row of trees beside a line (hedgerows along a road)
+        if "tree_row_m" in line:
+            t0, d = np.asarray(line["towers"][0]), np.asarray(line["dir"])
+            along = np.arange(-50.0, W + 50.0, 11.0) + rng.uniform(-3, 3)
+            side = rng.choice([-1.0, 1.0], len(along)) * rng.uniform(*line["tree_row_m"], len(along))
+            rows.append(t0 + along[:, None] * d + side[:, None] * np.array([-d[1], d[0]]))
+    pos = np.vstack([pos, scattered, *rows, bushes])
     is_bush = np.r_[np.zeros(len(pos) - n_bush, bool), np.ones(n_bush, bool)]
     u, v = pos[:, 0], pos[:, 1]
     ok = (u > 2) & (u < W - 2) & (v > 2) & (v < H - 2) & ~terrain.excluded(u, v, 1.0)
@@ -462,8 +490,9 @@ def _place_trees(kind, W, H, rng, terrain, buildings, lines):
     height = np.where(small, rng.uniform(2.5, 4.8, n), height)
     if lines:
         # trees under line A stay below the conductors (utilities trim them)
-        under = _line_distance(u, v, lines[0]) < 12.0
-        height = np.where(under & ~is_bush, np.minimum(height, rng.uniform(5.0, 11.0, n)), height)
+        lo, hi = lines[0].get("trim_m", (5.0, 11.0))
+        under = _line_distance(u, v, lines[0]) < (3.0 if "trim_m" in lines[0] else 12.0)
+        height = np.where(under & ~is_bush, np.minimum(height, rng.uniform(lo, hi, n)), height)
     radius = np.where(is_bush, rng.uniform(0.5, 1.4, n), np.clip(height * rng.uniform(0.18, 0.3, n), 1.2, 5.5))
     conifer = ~is_bush & (rng.uniform(0, 1, n) < 0.35)
     base_rel = np.where(is_bush, 0.1, height * rng.uniform(0.25, 0.5, n))
