@@ -412,6 +412,35 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
         assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
 
 
+def test_distribution_corridor_at_default_parameters(tmp_path):
+    """Three wires on 9 m poles (1.2 m apart, the middle one 1 m higher) with trees under and
+    beside them, crossed by a two-wire line: every conductor once, none false, every crossing
+    within 5 cm. (Pairwise merging of tile pieces once chained two of its wires into one line
+    between them.)"""
+    path = tmp_path / "dist.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", seed=1)
+    truth = json.loads(path.with_name("dist_truth.json").read_text())
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = []
+    for k, t in enumerate(truth["conductor_lines_2d"]):
+        a, b = np.array(t["a"]), np.array(t["b"])
+        td = (b - a) / np.linalg.norm(b - a)
+        for i, g in enumerate(cond.geometry):
+            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+            d = np.array([bx - ax, by - ay]) / g.length
+            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                hits.append((k, i))
+    assert sorted({k for k, _ in hits}) == list(range(5)) and len(cond) == len(hits) == 5
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    assert len(cr) == len(truth["crossings"]) == 6
+    for c in truth["crossings"]:
+        assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
+    t14 = np.asarray(laspy.read(path).classification) == 14
+    p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.85
+
+
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")

@@ -312,7 +312,8 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
     """Hough lines per tile (each shifted to its minimum x, y), shifted back and merged: lines that
     are collinear (angle < merge_angle_deg, offset < merge_offset_m) and overlap or come within
     merge_gap_m of each other along their direction (tile overlaps, the gap at a pylon) become one
-    conductor, refitted on all its points."""
+    conductor, refitted on all its points; a merged group whose points spread across its refit by
+    more than merge_offset_m is split where its pieces' offsets part."""
     found = []
     tile_list = list(tiles(x, y, tile_size_m, overlap_m)) if tile_size_m > 0 else [(float(x.min()), float(y.min()), np.ones(len(x), bool))]
     it = progress(tile_list) if progress else tile_list
@@ -349,8 +350,32 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
     groups: dict[int, list[int]] = {}
     for i in range(len(found)):
         groups.setdefault(root(i), []).append(i)
+    # pairwise merging chains: a slightly slanted piece can join two wires side by side into one
+    # group, whose refit then lies between them. A group whose points spread across its refit
+    # line by more than merge_offset_m is split where its pieces' offsets part (two-means)
+    todo, final = list(groups.values()), []
+    while todo:
+        g = todo.pop()
+        if len(g) < 2:
+            final.append(g)
+            continue
+        members = np.unique(np.concatenate([found[i].members for i in g]))
+        anchor, direction, rms = fit_line(x[members], y[members], v_max)
+        if rms <= merge_offset_m:
+            final.append(g)
+            continue
+        nrm = np.array([-direction[1], direction[0]])
+        offs = np.array([float(np.median((np.column_stack([x[found[i].members], y[found[i].members]]) - anchor) @ nrm))
+                         for i in g])
+        order = np.argsort(offs)
+        gaps = np.diff(offs[order])
+        cut = int(np.argmax(gaps))
+        if gaps[cut] <= merge_offset_m:
+            final.append(g)
+            continue
+        todo += [[g[k] for k in order[:cut + 1]], [g[k] for k in order[cut + 1:]]]
     out = []
-    for g in groups.values():
+    for g in final:
         members = np.unique(np.concatenate([found[i].members for i in g]))
         anchor, direction, rms = fit_line(x[members], y[members], v_max)
         pts = np.column_stack([x[members], y[members]])
