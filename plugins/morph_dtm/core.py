@@ -262,15 +262,16 @@ def _neighbour_pairs(shape):
     return a, b
 
 
-def object_segments(surface, is_object, step):
+def object_segments(surface, is_object, step, pairs=None):
     """Connected sets of object cells, neighbours joined where their heights differ by at most
-    ``step``: (label per cell, -1 off the objects; number of segments)."""
+    ``step``: (label per cell, -1 off the objects; number of segments). ``pairs``: the grid's
+    ``_neighbour_pairs``, when the caller has them."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     f = surface.ravel()
     o = is_object.ravel()
-    a, b = _neighbour_pairs(surface.shape)
+    a, b = _neighbour_pairs(surface.shape) if pairs is None else pairs
     join = o[a] & o[b] & (np.abs(f[a] - f[b]) <= step)
     ids = np.flatnonzero(o)
     pos = np.full(f.size, -1, np.int64)
@@ -287,11 +288,11 @@ def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1):
     ``raised_share`` of their border (inside ``domain``) they stand more than ``step`` over the
     neighbouring cell. The connected-operator view of an object (Mongus & Žalik 2014): a terrace or
     a courtyard that a window opening cuts away lies *below* the buildings around it."""
-    label, n_seg = object_segments(surface, is_object, step)
+    a, b = _neighbour_pairs(surface.shape)
+    label, n_seg = object_segments(surface, is_object, step, (a, b))
     f = surface.ravel()
     lab = label.ravel()
     dom = domain.ravel()
-    a, b = _neighbour_pairs(surface.shape)
     up = np.zeros(n_seg)
     border = np.zeros(n_seg)
     for s_, t_ in ((a, b), (b, a)):

@@ -111,7 +111,7 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
     rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
     cols = idx.ravel()[ok.ravel()]
     g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    n_comp, lab = connected_components(g, directed=False)
+    _, lab = connected_components(g, directed=False)
     out = np.zeros(n, bool)
     lab = np.where(smooth, lab, -1)
     for k in np.unique(lab[planar]):
@@ -334,7 +334,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     spans: list[Span] = []
     line_of = np.full(len(px), -1, np.int64)
     wire_of_point = np.full(len(px), -1, np.int64)
-    # each point belongs to the nearest 2D line (bands of neighbouring lines overlap)
+    # each point belongs to the nearest 2D line that reaches it (bands of neighbouring lines overlap)
     owner = np.full(len(px), -1)
     best = np.full(len(px), np.inf)
     for li, (anchor, direction, t0, t1) in enumerate(lines):
@@ -345,19 +345,14 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         score = np.where(beyond <= reach, d, np.inf)
         closer = score < best
         owner[closer], best[closer] = li, score[closer]
-    for li, (anchor, direction, t0, t1) in enumerate(lines):
+    for li, (anchor, direction, _, _) in enumerate(lines):
         normal = np.array([-direction[1], direction[0]])
-        cand = np.flatnonzero((owner == li) & (best <= band))
-        t0, t1 = t0 - reach, t1 + reach
-        if len(cand) == 0:
+        cand = np.flatnonzero((owner == li) & (best <= band))  # within the band and the line's reach
+        if len(cand) < min_points:
             continue
         d = np.column_stack([px[cand], py[cand]]) - anchor
         off = d @ normal
         s = d @ direction
-        near = (np.abs(off) <= band) & (s >= t0 - band) & (s <= t1 + band)
-        cand, s, off = cand[near], s[near], off[near]
-        if len(cand) < min_points:
-            continue
         z = pz[cand]
         # height, continuity and lateral position: link points close along the line, in height and
         # across it (within ALS scatter across a wire; sub-conductors of a bundle, closer than that,
@@ -552,6 +547,7 @@ class Pylon:
     n_spans: int
     heading_deg: float
     cells: np.ndarray  # flat indices (on the search grid) of the tower's footprint
+    grid: tuple  # the search grid: (x0, y0, cell_m, rows, cols)
 
 
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
@@ -573,9 +569,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     ground (a lattice or a pole, not an arm or a crown). Tall cells join into candidates (8-
     connected); a candidate with a column, at most ``max_side_m`` across, where at least
     ``min_ends`` and more spans end (within ``end_radius_m`` of its body, or its arms' reach; a
-    span end counts for the nearest candidate only) than run past it (``span_lines``: each span's plan segment) is a tower: wires end at towers
-    and pass trees. Tiles cut spans at their edges, where no tower stands: that is what the
-    column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
+    span end counts for the nearest candidate only) than run past it (``span_lines``: each span's
+    plan segment) is a tower: wires end at towers and pass trees. Tiles cut spans at their edges,
+    where no tower stands: that is what the column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
     ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
     the square root of its footprint, arms included). The base is the middle of the column
     cells (the body; the arms reach out across the line).
@@ -659,10 +655,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             if n_past >= n_ends:
                 continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
-        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), cells))
-    _grid = (x0, y0, cell_m, rows, cols)
-    for p in found:
-        p.grid = _grid
+        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), cells,
+                           (x0, y0, cell_m, rows, cols)))
     return found
 
 

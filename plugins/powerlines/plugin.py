@@ -170,11 +170,9 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     import numpy as np
     from shapely.geometry import Point
 
-    from .core import find_pylons, pylon_points
+    from .core import catenary, find_pylons, pylon_points
 
     off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
-    from .core import catenary
-
     ends, end_z, span_lines = [], [], []
     for sp in spans:
         a, d, _, _ = geo[sp.conductor]
