@@ -283,11 +283,11 @@ def object_segments(surface, is_object, step, pairs=None):
     return label.reshape(surface.shape), n_seg
 
 
-def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1):
-    """Object segments that are not raised above their surroundings: along less than
-    ``raised_share`` of their border (inside ``domain``) they stand more than ``step`` over the
-    neighbouring cell. The connected-operator view of an object (Mongus & Žalik 2014): a terrace or
-    a courtyard that a window opening cuts away lies *below* the buildings around it."""
+def segment_rise(surface, is_object, domain, step):
+    """Object cells in segments (``object_segments``) and how each stands over its surroundings:
+    (label per cell, -1 off the objects; cells per segment; border length and the part of it
+    where the segment stands more than ``step`` over the neighbouring cell). Borders with cells
+    outside ``domain`` (the survey's footprint) say nothing either way and are not counted."""
     a, b = _neighbour_pairs(surface.shape)
     label, n_seg = object_segments(surface, is_object, step, (a, b))
     f = surface.ravel()
@@ -296,30 +296,74 @@ def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1):
     up = np.zeros(n_seg)
     border = np.zeros(n_seg)
     for s_, t_ in ((a, b), (b, a)):
-        # borders with cells outside the survey's footprint say nothing either way
         m = (lab[s_] >= 0) & (lab[s_] != lab[t_]) & dom[t_]
         border += np.bincount(lab[s_[m]], minlength=n_seg)
         up += np.bincount(lab[s_[m]], weights=(f[s_[m]] - f[t_[m]] > step), minlength=n_seg)
     size = np.bincount(lab[lab >= 0], minlength=n_seg)
-    ok = (size >= min_cells) & (border > 0) & (up < raised_share * border)
-    out = np.zeros(f.size, bool)
-    out[lab >= 0] = ok[lab[lab >= 0]]
-    return out.reshape(surface.shape)
+    return label, size, border, up
+
+
+def _per_cell(label, per_segment):
+    out = np.zeros(label.shape, bool)
+    on = label >= 0
+    out[on] = per_segment[label[on]]
+    return out
+
+
+def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1, rise=None):
+    """Object segments that are not raised above their surroundings: along less than
+    ``raised_share`` of their border (inside ``domain``) they stand more than ``step`` over the
+    neighbouring cell. The connected-operator view of an object (Mongus & Žalik 2014): a terrace or
+    a courtyard that a window opening cuts away lies *below* the buildings around it.
+    ``rise``: ``segment_rise``'s answer, when the caller has it."""
+    label, size, border, up = rise if rise is not None else segment_rise(surface, is_object, domain, step)
+    return _per_cell(label, (size >= min_cells) & (border > 0) & (up < raised_share * border))
+
+
+def raised(rise, raised_share=0.5):
+    """The converse, any size: object segments standing more than the step over their
+    surroundings along at least ``raised_share`` of their border (roofs, bridge decks, crowns)."""
+    label, size, border, up = rise
+    return _per_cell(label, (border > 0) & (up >= raised_share * border))
 
 
 @dataclass
 class GroundResult:
     ground: np.ndarray  # bool per point
     noise: np.ndarray  # bool per point (low outliers)
-    grid: Grid
-    provisional: np.ndarray  # provisional bare-earth surface on the filter grid
+    grid: Grid  # the filter grid
+    provisional: np.ndarray  # provisional bare-earth surface on the filter grid (after the opening)
     object_cells: np.ndarray  # cells removed by the multi-scale filter
     terrace_cells: np.ndarray | None = None  # cells the opening removed that the segment test kept
+    surface: np.ndarray | None = None  # the surface the final ground test used, on ``surface_grid``
+    surface_grid: Grid | None = None
+    point_spacing: float = float("nan")  # mean point spacing over the footprint (cloud's units)
+
+
+def mean_spacing(n_points: int, domain: np.ndarray, cell: float) -> float:
+    """Mean distance between points: sqrt(footprint area / points)."""
+    return float(np.sqrt(max(int(domain.sum()), 1) * cell * cell / max(n_points, 1)))
+
+
+def refine_cell_size(spacing: float, filter_cell: float, smallest: float, per_spacing: float = 1.25) -> float:
+    """Cell of the last refinement: ``per_spacing`` x the point spacing (a 3x3 block then holds about
+    14 points, enough for a robust plane), between ``smallest`` and the filter cell."""
+    return float(np.clip(per_spacing * spacing, min(smallest, filter_cell), filter_cell))
+
+
+def _finer_domain(grid: Grid, domain: np.ndarray, fine: Grid) -> np.ndarray:
+    """``domain`` (on ``grid``) sampled at the cell centres of ``fine``."""
+    xs, ys = fine.centres()
+    r, c = grid.index(np.broadcast_to(xs[None, :], (fine.rows, fine.cols)),
+                      np.broadcast_to(ys[:, None], (fine.rows, fine.cols)))
+    return domain[r, c]
 
 
 def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, ground_threshold: float,
                   slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True,
-                  accel=None, jump=None, min_terrace_cells: int = 1, raised_share: float = 0.5) -> GroundResult:
+                  accel=None, jump=None, min_terrace_cells: int = 1, raised_share: float = 0.5,
+                  refill_gaps: bool = True, refine_cell: float | None = None,
+                  min_refine_cell: float = 0.0) -> GroundResult:
     """Label ground points (all lengths in the cloud's units).
 
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
@@ -328,10 +372,14 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
        (Δh ≥ n + k·size up to ``max_size``). With ``jump``, object cells are grouped into
        segments (neighbours less than ``jump`` apart in height), and a segment of at least
        ``min_terrace_cells`` that stands more than ``jump`` over its neighbours along less than
-       ``raised_share`` of its border is ground again (``not_raised``).
+       ``raised_share`` of its border is ground again (``not_raised``). With ``refill_gaps``, the
+       empty cells are filled again from the cells kept as ground and the opening repeated.
     3. The remaining cells' minima, holes filled, give a provisional bare earth; a point is
        ground when it lies within ``ground_threshold + slope_factor · slope · cell`` of it
        (steep cells tolerate more, as a cell's points spread over its height range).
+    4. With ``refine``: a surface fitted to those ground points (a plane per 3x3 cells) replaces
+       it and the test is repeated, first on the filter grid, then on a grid of ``refine_cell``
+       (None: ``refine_cell_size`` of the measured point spacing, at least ``min_refine_cell``).
 
     ``accel`` (optional) provides ``minimum_surface``, ``moments`` and ``near_surface`` doing the
     per-point passes in parallel kernels; the numpy versions here are their references.
@@ -344,38 +392,61 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     occupied = np.isfinite(zmin)
     domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
     filled = fill_holes(zmin, occupied, domain)
-    is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
-    terraces = None
-    if jump is not None:
-        # a window opening also cuts away terraces, courtyards and ground between buildings: the
-        # connected-operator test keeps the object sets that are not raised above their surroundings
-        terraces = not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells)
-        is_object &= ~terraces
-    keep = occupied & ~is_object
-    if not keep.any():
-        keep = occupied
-    provisional = fill_holes(np.where(keep, zmin, np.nan), keep, domain)
-    if accel is not None:
-        def near(surface):
-            return accel.near_surface(grid, x, y, z, surface, surface_slope(surface, grid.cell), ground_threshold,
-                                      slope_factor, low_outlier)
-    else:
-        sample = Sampler(grid, x, y)  # bilinear weights once, for both passes
+    gaps = domain & ~occupied
+    for again in range(2 if refill_gaps and gaps.any() else 1):
+        if again:
+            # a gap (water, a shadow) was filled from the cells around it, trees on its rim
+            # included, so the rim's objects were not raised above it: fill it from the ground
+            filled = np.where(occupied, zmin, provisional)
+        is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
+        terraces = raised_cells = None
+        if jump is not None:
+            # a window opening also cuts away terraces, courtyards and ground between buildings: the
+            # connected-operator test keeps the object sets that are not raised above their surroundings
+            rise = segment_rise(filled, is_object, domain, jump)
+            terraces = not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells, rise)
+            raised_cells = raised(rise, raised_share)
+            is_object &= ~terraces
+        keep = occupied & ~is_object
+        if not keep.any():
+            keep = occupied
+        provisional = fill_holes(np.where(keep, zmin, np.nan), keep, domain)
+    spacing = mean_spacing(len(x), domain, cell)
 
-        def near(surface):
-            return _near_surface(sample, grid.cell, surface, z, ground_threshold, slope_factor, low_outlier)
-    ground, dz = near(provisional)
+    samplers = {}  # numpy: bilinear weights once per grid
+
+    def near(g, surface):
+        if accel is not None:
+            return accel.near_surface(g, x, y, z, surface, surface_slope(surface, g.cell), ground_threshold,
+                                      slope_factor, low_outlier)
+        sample = samplers.setdefault(id(g), Sampler(g, x, y))
+        return _near_surface(sample, g.cell, surface, z, ground_threshold, slope_factor, low_outlier)
+
+    ground, dz = near(grid, provisional)
     ground &= ~noise
-    if refine and ground.sum() >= 3:
-        # second pass: the surface fitted to the first pass's ground points (plane per cell)
-        # follows the terrain between cell minima, so the same tolerance separates better
-        refined, _ = dtm_from_ground(grid, x, y, z, where=ground,
-                                     moments=accel.moments if accel is not None else None, domain=domain)
-        ground, dz = near(refined)
-        ground &= ~noise
-        provisional = refined
+    surface, surface_grid = provisional, grid
+    if refine:
+        fine_cell = refine_cell if refine_cell is not None else refine_cell_size(spacing, cell, min_refine_cell)
+        fine = Grid.around(x, y, fine_cell)
+        # the surface fitted to the ground points (a plane per cell) follows the terrain between
+        # cell minima; once more on a grid matched to the point spacing, which follows breaklines.
+        # What a pass adds on a raised object never supports the next: at a bridge's end the deck
+        # continues the road, and each pass would climb further onto it
+        off_raised = None if raised_cells is None else ~raised_cells.ravel()[flat]
+        support = ground
+        for g, dom in ((grid, domain), (fine, None)):
+            if support.sum() < 3:
+                break
+            if dom is None:
+                dom = _finer_domain(grid, domain, g)
+            surface, _ = dtm_from_ground(g, x, y, z, where=support,
+                                         moments=accel.moments if accel is not None else None, domain=dom)
+            surface_grid = g
+            ground, dz = near(g, surface)
+            ground &= ~noise
+            support = ground if off_raised is None else ground & off_raised
     noise |= dz < -2 * low_outlier
-    return GroundResult(ground, noise, grid, provisional, is_object, terraces)
+    return GroundResult(ground, noise, grid, provisional, is_object, terraces, surface, surface_grid, spacing)
 
 
 def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):

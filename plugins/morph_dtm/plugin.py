@@ -31,7 +31,11 @@ GROUND_PARAMETERS = [
               unit="m", minimum=0.0, maximum=50.0),
     Parameter("min_terrace_m2", float, 40.0, "smallest such set (terrace, courtyard) given back to the ground",
               unit="m2", minimum=0.0, maximum=1e6),
+    Parameter("refine_cell_m", float, None, "cell of the last refinement surface (a plane per 3x3 cells through "
+              "the ground points); auto: 1.25 x the mean point spacing, between 1 m and filter_cell_m "
+              "(reported as refine_cell_m_used)", unit="m", minimum=0.1, maximum=50.0, allow_auto=True),
 ]
+MIN_AUTO_REFINE_CELL_M = 1.0  # finer grids cost memory and time on dense tiles for no gain in the ground test
 
 
 def _ground(pc, p, accel=None):
@@ -50,6 +54,8 @@ def _ground(pc, p, accel=None):
         slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu, accel=accel,
         jump=p["jump_m"] / vu if p["jump_m"] > 0 else None,
         min_terrace_cells=max(1, int(np.ceil(p["min_terrace_m2"] / (p["filter_cell_m"] ** 2)))),
+        refine_cell=None if p["refine_cell_m"] is None else p["refine_cell_m"] / hu,
+        min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu,
     ), Grid
 
 
@@ -75,12 +81,13 @@ def _ground_and_noise(pc, params, accel=None):
         cls0 = pc.classification
         if cls0 is None or not np.any(cls0 == 2):
             raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
-        return cls0 == 2, cls0 == 7, None
+        return cls0 == 2, cls0 == 7, {}
     gr, _ = _ground(pc, params, accel)
+    hu = pc.horizontal_unit_m
     # area of the terraces / courtyards the segment test gave back to the ground (m², reported)
-    terraces = None if gr.terrace_cells is None else round(
-        float(gr.terrace_cells.sum()) * (gr.grid.cell * pc.horizontal_unit_m) ** 2, 1)
-    return gr.ground, gr.noise, terraces
+    terraces = None if gr.terrace_cells is None else round(float(gr.terrace_cells.sum()) * (gr.grid.cell * hu) ** 2, 1)
+    return gr.ground, gr.noise, {"terrace_m2_kept": terraces, "point_spacing_m": round(gr.point_spacing * hu, 3),
+                                 "refine_cell_m_used": round(gr.surface_grid.cell * hu, 3)}
 
 
 def _check_grid(pc, cell, name):
@@ -98,6 +105,11 @@ def _check_grids(pc, params):
     pc.require_points("the ground filter", 10)
     _check_grid(pc, params["filter_cell_m"] / pc.horizontal_unit_m, "filter_cell_m")
     _check_grid(pc, params["resolution_m"] / pc.horizontal_unit_m, "resolution_m")
+    refine = params["refine_cell_m"]
+    if refine is not None or params["filter_cell_m"] > MIN_AUTO_REFINE_CELL_M:
+        # (auto: the smallest it may choose)
+        _check_grid(pc, min(refine or MIN_AUTO_REFINE_CELL_M, params["filter_cell_m"]) / pc.horizontal_unit_m,
+                    "refine_cell_m")
 
 
 def _footprint(grid, x, y, radius_cells):
@@ -205,7 +217,7 @@ def _run_dtm(inputs, params, ctx):
     _check_grids(pc, params)
     accel = _accel(ctx, len(pc))
     t0 = time.perf_counter()
-    ground, noise, terraces = _ground_and_noise(pc, params, accel)
+    ground, noise, filter_stats = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
     cls = np.ones(len(pc), np.uint8)
     cls[ground] = 2
@@ -217,7 +229,7 @@ def _run_dtm(inputs, params, ctx):
     if ctx.wants("preview"):
         out["preview"] = _preview(dtm, pc, ground, noise)
     stats = {"n_points": len(pc), "n_ground": int(ground.sum()), "n_noise": int(noise.sum()),
-             "ground_share": round(float(ground.mean()), 4), "terrace_m2_kept": terraces,
+             "ground_share": round(float(ground.mean()), 4), **filter_stats,
              "filter_s": round(t1 - t0, 3),
              "dtm_s": round(t2 - t1, 3)}
     if "label" in pc.fields:  # ISPRS filter-test reference labels: 0 bare earth, 1 object
@@ -283,12 +295,14 @@ def toolbox_algorithms():
             description=(
                 "Ground filter by multi-scale morphological opening: openings of growing size up to the largest "
                 "object; at each cell the scale with the largest height drop is the object's size, and it is "
-                "removed when Δh ≥ n + k·size. A removed set that does not stand over its surroundings "
+                "removed when Δh ≥ n + k·size; gaps in the data (water, shadows) are filled from the ground the "
+                "first opening kept and the opening repeated, so trees on a gap's rim stand out. A removed set that does not stand over its surroundings "
                 "(segments split at height jumps over jump_m; raised along less than half their border: a "
                 "terrace below buildings, a raised square, ground between blocks) is ground again (connected-"
                 "operator view; the area given back is reported as terrace_m2_kept). "
-                "Ground points (within a slope-aware tolerance of the filtered "
-                "surface) make the DTM: a plane fitted per cell, holes under buildings and water filled by "
+                "Ground points lie within a slope-aware tolerance of the filtered "
+                "surface, refined twice: planes fitted to the ground points per 3x3 filter cells, then on a grid "
+                "of about the point spacing (refine_cell_m). They make the DTM: a plane fitted per cell, holes under buildings and water filled by "
                 "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
