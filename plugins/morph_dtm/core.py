@@ -379,7 +379,8 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
        (steep cells tolerate more, as a cell's points spread over its height range).
     4. With ``refine``: a surface fitted to those ground points (a plane per 3x3 cells) replaces
        it and the test is repeated, first on the filter grid, then on a grid of ``refine_cell``
-       (None: ``refine_cell_size`` of the measured point spacing, at least ``min_refine_cell``).
+       (None: ``refine_cell_size`` of the measured point spacing, at least ``min_refine_cell``);
+       where that grid is at most half the filter cell, on it alone.
 
     ``accel`` (optional) provides ``minimum_surface``, ``moments`` and ``near_surface`` doing the
     per-point passes in parallel kernels; the numpy versions here are their references.
@@ -434,7 +435,12 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
         # continues the road, and each pass would climb further onto it
         off_raised = None if raised_cells is None else ~raised_cells.ravel()[flat]
         support = ground
-        for g, dom in ((grid, domain), (fine, None)):
+        passes = ((grid, domain), (fine, None))
+        if fine.cell <= 0.5 * cell:
+            # dense points: the fine grid's blocks hold plenty to start from the provisional surface,
+            # and the pass on the filter grid changed nothing measurable but cost a pass over them
+            passes = ((fine, None),)
+        for g, dom in passes:
             if support.sum() < 3:
                 break
             if dom is None:
