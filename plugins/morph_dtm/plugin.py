@@ -301,8 +301,9 @@ def toolbox_algorithms():
                 "terrace below buildings, a raised square, ground between blocks) is ground again (connected-"
                 "operator view; the area given back is reported as terrace_m2_kept). "
                 "Ground points lie within a slope-aware tolerance of the filtered "
-                "surface, refined twice: planes fitted to the ground points per 3x3 filter cells, then on a grid "
-                "of about the point spacing (refine_cell_m). They make the DTM: a plane fitted per cell, holes under buildings and water filled by "
+                "surface, refined by planes fitted to the ground points per 3x3 filter cells, then per 3x3 cells of "
+                "about the point spacing (refine_cell_m; where that is at most half the filter cell, there "
+                "alone). They make the DTM: a plane fitted per cell, holes under buildings and water filled by "
                 "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
