@@ -1,0 +1,255 @@
+"""Roof planes by a 3D Hough transform voting into a ball accumulator.
+
+Pure functions on arrays (lengths in the cloud's units). The method (Borowiec, METHODS.md §3)
+votes every point into a (θ, φ, ρ) accumulator and takes the fullest cell as a plane; here the
+(θ, φ) part is the ball accumulator of Borrmann et al. (2011, 3D Research 2(2)), whose cells have
+nearly equal area on the sphere, and each peak is only a hypothesis: its points are refitted by
+least squares and grown to all points within ``max_distance`` of the fitted plane, split into
+connected patches, and the patches of at least ``min_points`` become planes whose votes are taken
+back from the accumulator before the next peak. At the end every point goes to the nearest plane
+whose patch it touches (points along a ridge are near both faces) and near-duplicate planes merge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from . import reference
+
+ACC_BYTES_PER_CELL = 4  # int32 counts
+
+
+@dataclass
+class Plane:
+    normal: np.ndarray  # unit normal, z >= 0
+    d: float  # normal · p = d, in the coordinates of the points given
+    indices: np.ndarray  # the points on the plane
+    rms: float
+
+
+def fit_plane(xyz: np.ndarray):
+    """Least-squares plane through points: (unit normal with z >= 0, d, rms of the distances)."""
+    c = xyz.mean(axis=0)
+    _, s, vt = np.linalg.svd(xyz - c, full_matrices=False)
+    n = vt[-1]
+    if n[2] < 0:
+        n = -n
+    rms = float(s[-1] / np.sqrt(max(len(xyz), 1)))
+    return n, float(n @ c), rms
+
+
+def accumulator_shape(n_cells: int, radius: float, rho_step: float):
+    """(cells, ρ bins, k_min) of an accumulator for points within ``radius`` of the origin."""
+    half = int(np.ceil(radius / rho_step)) + 1
+    return n_cells, 2 * half + 1, -half
+
+
+def accumulator_bytes(angle_step_deg: float, radius: float, rho_step: float) -> int:
+    """Memory of the ball accumulator for points within ``radius`` of their centroid (computed
+    before anything is allocated)."""
+    cells, n_rho, _ = accumulator_shape(len(reference.ball_cells(angle_step_deg)), radius, rho_step)
+    return cells * n_rho * ACC_BYTES_PER_CELL
+
+
+def patches(xy: np.ndarray, link: float) -> tuple[np.ndarray, int]:
+    """Connected sets of points in plan, neighbours closer than ``link``: (label per point, count)."""
+    if len(xy) == 0:
+        return np.zeros(0, np.int64), 0
+    pairs = cKDTree(xy).query_pairs(link, output_type="ndarray")
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy), len(xy)))
+    n, lab = connected_components(g, directed=False)
+    return lab, n
+
+
+def local_normals(xyz: np.ndarray, k: int = 10) -> np.ndarray:
+    """Unit normal (z >= 0) of the least-squares plane through each point's ``k`` nearest
+    neighbours (itself included)."""
+    k = int(min(k, len(xyz)))
+    _, nb = cKDTree(xyz).query(xyz, k=k)
+    q = xyz[nb] - xyz[nb].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", q, q)
+    _, vec = np.linalg.eigh(cov)
+    n = vec[:, :, 0]
+    return n * np.where(n[:, 2:3] < 0, -1.0, 1.0)
+
+
+def _grow(p: np.ndarray, free: np.ndarray, seed: np.ndarray, max_distance: float, normals=None,
+          cos_tol: float = -1.0, rounds: int = 4):
+    """Refit a plane from ``seed`` points and grow it to the free points within ``max_distance``
+    whose own (local) normal is within the tolerance of the plane's; returns (normal, d, inliers
+    as indices into p) or None. The normal test is what tells a face from a slice across several
+    faces (a horizontal band round a pyramid roof holds as many points as a face)."""
+    idx = seed
+    n = d = None
+    for _ in range(rounds):
+        if len(idx) < 3:
+            return None
+        n, d, _ = fit_plane(p[idx])
+        near = np.abs(p[free] @ n - d) <= max_distance
+        if normals is not None:
+            near &= np.abs(normals[free] @ n) >= cos_tol
+        new = free[near]
+        if len(new) == len(idx) and np.array_equal(new, idx):
+            break
+        idx = new
+    return n, d, idx
+
+
+def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_distance: float,
+                  min_points: int, link: float, voter=reference.vote, max_failures: int = 30,
+                  normal_tol_deg: float | None = 10.0, neighbours: int = 10, min_width: float = 0.0) -> list[Plane]:
+    """Planes in one building's points (lengths in the points' units). ``normal_tol_deg``: a point
+    joins a plane only when the plane of its ``neighbours`` nearest points is this close to it
+    (None: distance alone, as the method). ``min_width``: narrowest face (its points' spread across
+    their longest direction, as the width of a uniform strip)."""
+    xyz = np.asarray(xyz, np.float64)
+    if len(xyz) < min_points:
+        return []
+    centre = xyz.mean(axis=0)
+    p = xyz - centre
+    normals = reference.ball_cells(angle_step_deg)
+    radius = float(np.sqrt((p * p).sum(axis=1).max()))
+    cells, n_rho, k_min = accumulator_shape(len(normals), radius, rho_step)
+    scaled, off = reference.bin_scales(normals, rho_step, k_min)
+    acc = np.zeros((cells, n_rho), np.int32)
+    voter(acc, p, scaled, off, 1)
+    normals_pt = local_normals(p, neighbours) if normal_tol_deg is not None else None
+    cos_tol = np.cos(np.radians(normal_tol_deg)) if normal_tol_deg is not None else -1.0
+    active = np.ones(len(p), bool)
+    found: list[tuple[np.ndarray, float, np.ndarray]] = []
+    failures = 0
+    while active.sum() >= min_points and failures < max_failures:
+        flat = int(np.argmax(acc))
+        cell, k = divmod(flat, n_rho)
+        if acc[cell, k] < min_points:
+            break
+        free = np.flatnonzero(active)
+        bins = reference.bin_index(p[free], scaled[cell:cell + 1], off)[:, 0]
+        grown = _grow(p, free, free[bins == k], max_distance, normals_pt, cos_tol)
+        accepted = []
+        if grown is not None and len(grown[2]) >= min_points:
+            n, d, idx = grown
+            lab, n_lab = patches(p[idx, :2], link)
+            sizes = np.bincount(lab, minlength=n_lab)
+            for j in np.flatnonzero(sizes >= min_points):
+                accepted.append(idx[lab == j])
+        if not accepted:
+            acc[cell, k] = 0  # this hypothesis explains no patch: never try it again
+            failures += 1
+            continue
+        failures = 0
+        for part in accepted:
+            n, d, _ = fit_plane(p[part])
+            found.append((n, d, part))
+            active[part] = False
+            voter(acc, p[part], scaled, off, -1)
+    planes = _assign(p, found, max_distance, link)
+    # a plane left small by the nearest-plane rule, or a strip along a ridge (points of two faces
+    # whose local planes lean halfway), is no face: its points go to the others
+    kept = [(n, d, idx) for n, d, idx in planes if len(idx) >= min_points and _width(p[idx]) >= min_width]
+    # a plane most of whose points lie as near another plane is a strip across their intersection
+    kept.sort(key=lambda t: len(t[2]))
+    j = 0
+    while j < len(kept):
+        n, d, idx = kept[j]
+        others = [o for i, o in enumerate(kept) if i != j]
+        near = np.zeros(len(idx), bool)
+        for n2, d2, _ in others:
+            near |= np.abs(p[idx] @ n2 - d2) <= max_distance
+        if others and near.mean() > 0.5:
+            del kept[j]
+        else:
+            j += 1
+    if len(kept) < len(planes):
+        planes = _assign(p, kept, max_distance, link)
+    planes = _merge(p, planes, max_distance, link)
+    out = []
+    for n, d, idx in planes:
+        n, d, rms = fit_plane(p[idx])
+        # the normal from the points within 2.5 rms (a few points of a neighbouring face at the
+        # intersection tilt a small face's fit)
+        core_pts = idx[np.abs(p[idx] @ n - d) <= 2.5 * rms]
+        if len(core_pts) >= max(3, 0.8 * len(idx)):
+            n, d, _ = fit_plane(p[core_pts])
+            rms = float(np.sqrt(np.mean((p[idx] @ n - d) ** 2)))
+        out.append(Plane(n, d + float(n @ centre), idx, rms))
+    return out
+
+
+def _assign(p, found, max_distance, link):
+    """Every point to the nearest plane (within ``max_distance``) whose patch it touches in plan;
+    planes left with fewer than 3 points are dropped."""
+    if not found:
+        return []
+    best = np.full(len(p), -1)
+    best_d = np.full(len(p), np.inf)
+    for j, (n, d, idx) in enumerate(found):
+        near = cKDTree(p[idx, :2]).query(p[:, :2], distance_upper_bound=link)[0] <= link
+        dist = np.abs(p @ n - d)
+        better = near & (dist <= max_distance) & (dist < best_d)
+        best[better] = j
+        best_d[better] = dist[better]
+    out = []
+    for j, (n, d, _) in enumerate(found):
+        idx = np.flatnonzero(best == j)
+        if len(idx) >= 3:
+            out.append((n, d, idx))
+    return out
+
+
+def _width(xyz: np.ndarray) -> float:
+    """Width of a set of points spread over a strip: sqrt(12 x the middle principal variance)."""
+    if len(xyz) < 3:
+        return 0.0
+    ev = np.linalg.eigvalsh(np.cov((xyz - xyz.mean(axis=0)).T))
+    return float(np.sqrt(12.0 * max(ev[1], 0.0)))
+
+
+def _merge(p, planes, max_distance, link, max_angle_deg: float = 3.0):
+    """Merge planes of nearly the same orientation and offset whose points touch, while the
+    merged set still fits one plane within ``max_distance`` (rms under half of it)."""
+    cos_max = np.cos(np.radians(max_angle_deg))
+    planes = list(planes)
+    merged = True
+    while merged:
+        merged = False
+        for a in range(len(planes)):
+            for b in range(a + 1, len(planes)):
+                na, da, ia = planes[a]
+                nb, db, ib = planes[b]
+                if na @ nb < cos_max:
+                    continue
+                if cKDTree(p[ia, :2]).query(p[ib, :2], distance_upper_bound=link)[0].min() > link:
+                    continue
+                both = np.r_[ia, ib]
+                n, d, rms = fit_plane(p[both])
+                if rms > 0.5 * max_distance or np.abs(p[both] @ n - d).max() > 2 * max_distance:
+                    continue
+                planes[a] = (n, d, both)
+                del planes[b]
+                merged = True
+                break
+            if merged:
+                break
+    return planes
+
+
+def plane_attributes(normal: np.ndarray) -> tuple[float, float]:
+    """(slope in degrees from horizontal, aspect in degrees clockwise from north: the direction
+    the face looks down to)."""
+    slope = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
+    aspect = float(np.degrees(np.arctan2(normal[0], normal[1])) % 360.0)
+    return slope, aspect
+
+
+def mean_spacing_xy(xy: np.ndarray) -> float:
+    """Median distance in plan from a point to its nearest neighbour."""
+    if len(xy) < 2:
+        return float("nan")
+    d = cKDTree(xy).query(xy, k=2)[0][:, 1]
+    return float(np.median(d))

@@ -1,0 +1,187 @@
+"""Adapter of the roofs plugin: ``roof-planes`` (3D Hough with a ball accumulator). The computing
+lives in ``core`` (pure functions), the voting in ``kernels`` (taichi) and ``reference`` (numpy)."""
+
+from __future__ import annotations
+
+import toolbox
+from toolbox import Algorithm, DataError, Input, Output, Parameter, UsageError
+
+REFERENCE = ("Borowiec, Hough transform as a tool supporting building roof detection (METHODS.md §3); "
+             "Borrmann, Elseberg, Lingemann, Nüchter (2011), The 3D Hough Transform for plane detection in "
+             "point clouds: a review and a new accumulator design, 3D Research 2(2)")
+BUILDING_CELL_M = 1.0  # buildings are the 8-connected groups of 1 m cells holding roof points
+RAM_SHARE = 0.25  # default accumulator budget: this share of the machine's memory
+
+
+def _ram_bytes() -> int:
+    import os
+
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def _buildings(x, y, cell):
+    """Building number per point (1..n): 8-connected groups of occupied ``cell`` cells."""
+    import numpy as np
+    from scipy import ndimage
+
+    c = ((x - x.min()) / cell).astype(np.int64)
+    r = ((y - y.min()) / cell).astype(np.int64)
+    grid = np.zeros((r.max() + 1, c.max() + 1), bool)
+    grid[r, c] = True
+    lab, n = ndimage.label(grid, structure=np.ones((3, 3), bool))
+    return lab[r, c], n
+
+
+def _roof_points(pc, params, ctx):
+    """(mask of roof points, where they came from)."""
+    import numpy as np
+
+    source = params["source"]
+    cls = pc.classification
+    if source == "auto":
+        source = "classified" if cls is not None and np.any(cls == 6) else "detect"
+    if source == "all":
+        return np.ones(len(pc), bool), "all"
+    if source == "classified":
+        if cls is None or not np.any(cls == 6):
+            raise DataError(f"input {pc.source!r} has no building class (6); use source=detect or source=all")
+        return cls == 6, "classified"
+    res = ctx.call("classify", {"points": pc})
+    return np.asarray(res.outputs["classified"].classification) == 6, "detect"
+
+
+def _run(inputs, params, ctx):
+    import time
+
+    import geopandas as gpd
+    import numpy as np
+    import shapely
+    from shapely.geometry import MultiPoint, Polygon
+
+    from . import core, reference
+
+    pc = inputs["points"]
+    pc.require_points("roof-planes", 3)
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    t0 = time.perf_counter()
+    roof, source = _roof_points(pc, params, ctx)
+    idx = np.flatnonzero(roof)
+    # isotropic coordinates in the horizontal unit (a survey in feet: z may be in other units)
+    xyz = np.column_stack([pc.x[idx], pc.y[idx], pc.z[idx] * vu / hu])
+    if source == "all":
+        bid, n_b = np.ones(len(idx), np.int64), 1
+    elif len(idx):
+        bid, n_b = _buildings(xyz[:, 0], xyz[:, 1], BUILDING_CELL_M / hu)
+    else:
+        bid, n_b = np.zeros(0, np.int64), 0
+    angle = params["angle_step_deg"]
+    rho = params["rho_step_m"] / hu
+    min_points = params["min_points"]
+    order = np.argsort(bid, kind="stable")
+    bounds = np.searchsorted(bid[order], np.arange(1, n_b + 2))
+    groups = [order[bounds[b]:bounds[b + 1]] for b in range(n_b)]
+    groups = [(b + 1, g) for b, g in enumerate(groups) if len(g) >= min_points]
+    # the accumulator of the largest building, before anything is allocated
+    budget = (params["max_accumulator_mb"] * 2**20 if params["max_accumulator_mb"] is not None
+              else RAM_SHARE * _ram_bytes())
+    for b, g in groups:
+        p = xyz[g] - xyz[g].mean(axis=0)
+        radius = float(np.sqrt((p * p).sum(axis=1).max()))
+        need = core.accumulator_bytes(angle, radius, rho)
+        if need > budget:
+            raise UsageError(
+                f"roof-planes: the ball accumulator of building {b} in {pc.source!r} ({radius * hu:.0f} m across "
+                f"from its centre) would take {need / 2**20:.0f} MiB, over the budget of {budget / 2**20:.0f} MiB; "
+                f"raise angle_step_deg or rho_step_m (or max_accumulator_mb)")
+    spacing = core.mean_spacing_xy(xyz[:, :2]) if len(xyz) >= 2 else float("nan")
+    link = params["link_m"] / hu if params["link_m"] is not None else max(1.0 / hu, 4 * spacing)
+    voter = reference.vote
+    if groups:
+        from .kernels import TaichiVoter
+
+        voter = TaichiVoter(ctx.taichi())
+    plane_id = np.zeros(len(pc), np.int32)
+    rows, geoms = [], []
+    next_id = 1
+    for b, g in ctx.progress(groups, desc="roof-planes", unit="building"):
+        planes = core.detect_planes(xyz[g], angle, rho, params["max_distance_m"] / hu, min_points, link, voter,
+                                    normal_tol_deg=params["normal_tol_deg"] or None, min_width=link)
+        for pl in planes:
+            members = g[pl.indices]
+            plane_id[idx[members]] = next_id
+            pts = xyz[members]
+            hull = shapely.concave_hull(MultiPoint(pts[:, :2]), ratio=params["hull_ratio"])
+            if not isinstance(hull, Polygon) or hull.is_empty:
+                hull = MultiPoint(pts[:, :2]).convex_hull
+                if not isinstance(hull, Polygon):
+                    hull = hull.buffer(0.5 * spacing)
+            n = pl.normal
+            ring = np.asarray(hull.exterior.coords)
+            zr = (pl.d - ring[:, 0] * n[0] - ring[:, 1] * n[1]) / n[2] if n[2] > 0.05 else np.full(len(ring), pts[:, 2].mean())
+            geoms.append(Polygon(np.column_stack([ring, zr * hu / vu])))
+            slope, aspect = core.plane_attributes(n)
+            rows.append({"plane_id": next_id, "building_id": int(b), "normal_x": float(n[0]), "normal_y": float(n[1]),
+                         "normal_z": float(n[2]), "d": float(pl.d * hu), "slope_deg": round(slope, 3),
+                         "aspect_deg": round(aspect, 3), "n_points": int(len(members)),
+                         "rms_m": round(pl.rms * hu, 4), "area_m2": round(hull.area * hu * hu / max(n[2], 1e-6), 2)})
+            next_id += 1
+    if rows:
+        gdf = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs)
+    else:
+        gdf = gpd.GeoDataFrame({"plane_id": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+    gdf.attrs["geometry_type"] = "Polygon Z"
+    on_plane = int((plane_id > 0).sum())
+    stats = {"source": source, "n_roof_points": int(len(idx)), "n_buildings": len(groups), "n_planes": next_id - 1,
+             "points_on_planes": on_plane, "share_on_planes": round(on_plane / max(len(idx), 1), 4),
+             "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
+             "link_m_used": round(link * hu, 3), "accumulator_cells": len(reference.ball_cells(angle)),
+             "seconds": round(time.perf_counter() - t0, 3)}
+    return toolbox.Result({"planes": {"roof_planes": gdf}, "classified": pc.with_fields(plane_id=plane_id)},
+                          stats=stats)
+
+
+@toolbox.hookimpl
+def toolbox_algorithms():
+    return [Algorithm(
+        id="roof-planes", title="Roof planes (3D Hough, ball accumulator)", run=_run,
+        description=(
+            "Every roof point votes for the planes through it, ρ = x·cosθ·cosφ + y·sinθ·cosφ + z·sinφ, in a ball "
+            "accumulator (cells of nearly equal area on the sphere, Borrmann et al. 2011) per building; the "
+            "fullest cell is refitted by least squares, grown to the points within max_distance_m, split into "
+            "connected patches (link_m), and each patch of min_points or more is a plane whose votes are taken "
+            "back; repeated while a cell holds min_points votes. Points then go to the nearest plane they touch, "
+            "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped. Roof points: the file's class 6 (source=classified), buildings found by "
+            "classify (detect), or the whole input as one roof (all); auto takes class 6 when the file has it. "
+            "Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
+            "plane_id dimension (0: on no plane)."),
+        reference=REFERENCE,
+        parameters=[
+            Parameter("source", str, "auto", "where the roof points come from", choices=("auto", "classified",
+                                                                                         "detect", "all")),
+            Parameter("angle_step_deg", float, 2.0, "angular size of an accumulator cell (the refit, not the "
+                      "cell, sets the normal's accuracy)", unit="deg", minimum=0.1, maximum=30.0),
+            Parameter("rho_step_m", float, 0.2, "ρ bin of the accumulator", unit="m", minimum=0.005, maximum=10.0),
+            Parameter("max_distance_m", float, 0.15, "largest distance of a point from its plane", unit="m",
+                      minimum=0.001, maximum=10.0),
+            Parameter("min_points", int, 15, "smallest plane", unit="points", minimum=3),
+            Parameter("normal_tol_deg", float, 10.0, "a point joins a plane only when the plane through its 10 "
+                      "nearest points is this close to it (what tells a face from a slice across faces); 0: "
+                      "distance alone, as the method", unit="deg", minimum=0.0, maximum=90.0),
+            Parameter("link_m", float, None, "points closer than this in plan belong to one patch; coplanar "
+                      "patches further apart are separate planes (auto: 4 x the point spacing, at least 1 m; "
+                      "reported as link_m_used)", unit="m", minimum=0.01, maximum=100.0, allow_auto=True),
+            Parameter("hull_ratio", float, 0.3, "concave hull of a face's points (0 most concave, 1 convex)",
+                      minimum=0.0, maximum=1.0),
+            Parameter("max_accumulator_mb", float, None, "memory an accumulator may take (auto: a quarter of "
+                      "this machine's RAM); above it the run stops and says which resolution to lower",
+                      unit="MiB", minimum=1.0, maximum=1e7, allow_auto=True),
+        ],
+        inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud (buildings as class 6, or one roof)")],
+        outputs=[
+            Output("planes", "vector", "layer roof_planes: one PolygonZ per face", style="roof_planes"),
+            Output("classified", "points", "the input with plane_id (int32, 0 = on no plane)", suffix="_classified"),
+        ],
+    )]

@@ -1,0 +1,144 @@
+"""roof-planes: the ball accumulator's geometry, the taichi voting against its numpy reference,
+planes against exact synthetic truth and real per-point face labels (RoofN3D), the memory budget."""
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+from conftest import SHARED_DATA, shared_file
+
+import toolbox
+from toolbox_plugins.roofs import core, reference
+from toolbox_plugins.roofs.evaluation import plane_scores
+
+
+def test_ball_cells_have_nearly_equal_area():
+    for step in (1.0, 2.0, 5.0):
+        n = reference.ball_cells(step)
+        assert np.allclose(np.linalg.norm(n, axis=1), 1.0) and (n[:, 2] >= 0).all()
+        # the hemisphere (half of the equator ring: n and -n are one plane there) in cells of step²
+        expected = 2 * np.pi / np.radians(step) ** 2
+        assert 0.85 * expected < len(n) < 1.15 * expected
+        # every cell's nearest other cell is about one step away, at the pole as at the equator
+        from scipy.spatial import cKDTree
+
+        d, _ = cKDTree(n).query(n, k=2)
+        gap = np.degrees(2 * np.arcsin(d[:, 1] / 2))
+        assert np.percentile(gap, 5) > 0.6 * step and np.percentile(gap, 95) < 1.3 * step
+
+
+def test_taichi_voting_equals_the_numpy_reference():
+    from toolbox.kernels import taichi
+    from toolbox_plugins.roofs.kernels import TaichiVoter
+
+    rng = np.random.default_rng(4)
+    p = rng.uniform(-6, 6, (700, 3))
+    normals = reference.ball_cells(4.0)
+    cells, n_rho, k_min = core.accumulator_shape(len(normals), float(np.linalg.norm(p, axis=1).max()), 0.25)
+    scaled, off = reference.bin_scales(normals, 0.25, k_min)
+    ref = np.zeros((cells, n_rho), np.int32)
+    got = np.zeros_like(ref)
+    reference.vote(ref, p, scaled, off, 1)
+    TaichiVoter(taichi())(got, p, scaled, off, 1)
+    assert ref.sum() == len(p) * cells  # every vote landed
+    np.testing.assert_array_equal(got, ref)
+    reference.vote(ref, p[:300], scaled, off, -1)
+    TaichiVoter(taichi())(got, p[:300], scaled, off, -1)
+    np.testing.assert_array_equal(got, ref)
+    assert ref.sum() == 400 * cells
+
+
+def test_a_pyramid_is_four_faces_not_a_horizontal_slice():
+    """A low, sparse pyramid roof (RoofN3D's kind): a horizontal band round it holds as many points
+    as a face; the normal test tells them apart, distance alone takes the band."""
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-4, 4, (2, 250))
+    z = 3.0 - 0.27 * np.maximum(np.abs(x), np.abs(y)) + rng.normal(0, 0.05, 250)
+    xyz = np.column_stack([x, y, z])
+    face = np.where(np.abs(x) > np.abs(y), np.where(x > 0, 1, 2), np.where(y > 0, 3, 4))
+
+    def scores(**kw):
+        planes = core.detect_planes(xyz, 2.0, 0.2, 0.15, 15, 1.0, min_width=1.0, **kw)
+        pred = np.zeros(len(xyz), int)
+        for j, pl in enumerate(planes):
+            pred[pl.indices] = j + 1
+        return plane_scores(face, pred), planes
+
+    s, planes = scores()
+    assert s["completeness"] == 1.0 and s["correctness"] == 1.0 and s["right_face_share"] > 0.9, s
+    for pl in planes:
+        assert pl.rms < 0.08 and abs(core.plane_attributes(pl.normal)[0] - np.degrees(np.arctan(0.27))) < 2.0
+    assert scores(normal_tol_deg=None)[0]["completeness"] < 0.5  # the method's distance test alone
+
+
+@pytest.fixture(scope="module")
+def roof_scene(tmp_path_factory):
+    d = tmp_path_factory.mktemp("roofs")
+    toolbox.run("synthetic-scene", output=d / "r.laz", kind="roofs", seed=3)
+    return d / "r.laz"
+
+
+def test_roof_planes_on_synthetic_truth(roof_scene, tmp_path):
+    rep = toolbox.run("roof-planes", roof_scene, tmp_path / "p.gpkg")
+    assert rep["stats"]["source"] == "classified" and rep["stats"]["link_m_used"] >= 1.0
+    las = laspy.read(roof_scene)
+    truth_id = np.asarray(las.plane_id)
+    roof = np.asarray(las.classification) == 6
+    pred = np.asarray(laspy.read(tmp_path / "p_classified.laz").plane_id)
+    s = plane_scores(np.where(roof, truth_id, 0), np.where(roof, pred, 0))
+    assert s["completeness"] == 1.0 and s["correctness"] >= 0.95, s  # every face of >= 30 points
+    assert s["right_face_share"] >= 0.95, s
+    truth = {p["plane_id"]: p for p in json.loads((roof_scene.parent / "r_truth.json").read_text())["roof_planes"]}
+    import geopandas as gpd
+
+    layer = gpd.read_file(tmp_path / "p.gpkg", layer="roof_planes")
+    assert layer.geometry.has_z.all() and (layer.geom_type == "Polygon").all()
+    errors = []
+    for _, row in layer.iterrows():
+        ids, counts = np.unique(truth_id[roof & (pred == row.plane_id)], return_counts=True)
+        t = truth[int(ids[np.argmax(counts)])]
+        n = np.array([row.normal_x, row.normal_y, row.normal_z])
+        err = np.degrees(np.arccos(min(1.0, abs(n @ np.array(t["normal"])))))
+        errors.append((t["n_points"], err))
+        assert abs(row.slope_deg - t["slope_deg"]) < 1.5
+    errors = np.array(errors)
+    # faces of hundreds of points within 0.25 deg; a dormer's 30-45 points within 1.5 deg (its noise alone
+    # gives about 0.7 deg)
+    assert errors[errors[:, 0] >= 200, 1].max() < 0.25, errors
+    assert errors[:, 1].max() < 1.5, errors
+
+
+def test_roof_planes_on_real_roofs_with_face_labels(tmp_path):
+    shared_file("roofn3d/Pyramid_roof/points/1054136.pts")  # skips with the reason when absent
+    files = sorted((SHARED_DATA / "roofn3d").glob("*/points/*.pts"))
+    comp, corr = [], []
+    for f in files:
+        lab = np.loadtxt(f.parent.parent / "points_label" / f"{f.stem}.seg", dtype=int)
+        toolbox.run("roof-planes", f, tmp_path / "o.gpkg", overwrite=True, source="all", crs="EPSG:32618")
+        pred = np.asarray(laspy.read(tmp_path / "o_classified.laz").plane_id)
+        s = plane_scores(np.where(lab == 5, 0, lab), pred)  # 5: other / unassigned
+        comp.append(s["completeness"])
+        corr.append(s["correctness"])
+    # measured 0.938 / 0.962 over the 16 buildings (Awrangjeb & Fraser report about 0.8 on theirs)
+    assert np.mean(comp) >= 0.9 and np.mean(corr) >= 0.93, (comp, corr)
+
+
+def test_an_accumulator_over_budget_stops_before_allocation(roof_scene, tmp_path, cli):
+    r = cli("run", "roof-planes", roof_scene, "-o", tmp_path / "p.gpkg", "--set", "angle_step_deg=0.2",
+            "--set", "rho_step_m=0.01", "--set", "max_accumulator_mb=50")
+    assert r.returncode == 2
+    assert "MiB" in r.stderr and "angle_step_deg" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_no_roof_class_says_what_to_do(tmp_path, cli):
+    from toolbox.io.points import PointCloud, parse_crs, write_points
+
+    rng = np.random.default_rng(0)
+    pc = PointCloud(*rng.uniform(0, 10, (3, 100)), crs=parse_crs("EPSG:25832"),
+                    fields={"classification": np.full(100, 2, np.uint8)})
+    write_points(pc, tmp_path / "g.laz")
+    r = cli("run", "roof-planes", tmp_path / "g.laz", "-o", tmp_path / "p.gpkg", "--set", "source=classified")
+    assert r.returncode != 0 and "source=detect" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.laz"]
