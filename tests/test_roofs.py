@@ -142,3 +142,35 @@ def test_no_roof_class_says_what_to_do(tmp_path, cli):
     r = cli("run", "roof-planes", tmp_path / "g.laz", "-o", tmp_path / "p.gpkg", "--set", "source=classified")
     assert r.returncode != 0 and "source=detect" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.laz"]
+
+
+def test_roof_lines_lie_on_both_truth_faces(roof_scene, tmp_path):
+    import geopandas as gpd
+
+    toolbox.run("roof-planes", roof_scene, tmp_path / "p.gpkg")
+    las = laspy.read(roof_scene)
+    truth_id = np.asarray(las.plane_id)
+    roof = np.asarray(las.classification) == 6
+    pred = np.asarray(laspy.read(tmp_path / "p_classified.laz").plane_id)
+    truth = json.loads((roof_scene.parent / "r_truth.json").read_text())
+    faces = {p["plane_id"]: p for p in truth["roof_planes"]}
+    lines = gpd.read_file(tmp_path / "p.gpkg", layer="roof_lines")
+
+    def face_of(plane):
+        ids, counts = np.unique(truth_id[roof & (pred == plane)], return_counts=True)
+        return faces[int(ids[np.argmax(counts)])]
+
+    for b in truth["buildings"]:
+        mine = lines[lines.building_id.isin(np.unique(
+            [r.building_id for r in gpd.read_file(tmp_path / "p.gpkg", layer="roof_planes").itertuples()
+             if face_of(r.plane_id)["building_id"] == b["id"]]))]
+        if b["roof"] == "hip":  # one ridge and four hips
+            assert sorted(mine.kind) == ["hip"] * 4 + ["ridge"], (b, list(mine.kind))
+        if b["roof"] == "gable":
+            assert list(mine.kind) == ["ridge"]
+    assert len(lines) >= 10
+    for row in lines.itertuples():
+        fa, fb = face_of(row.plane_a), face_of(row.plane_b)
+        for xyz in np.asarray(row.geometry.coords):
+            for f in (fa, fb):  # the truth plane n·p = offset, in the scene's world coordinates
+                assert abs(np.dot(f["normal"], xyz) - f["offset"]) < 0.15, (row, f["face"])

@@ -253,3 +253,64 @@ def mean_spacing_xy(xy: np.ndarray) -> float:
         return float("nan")
     d = cKDTree(xy).query(xy, k=2)[0][:, 1]
     return float(np.median(d))
+
+
+@dataclass
+class RoofLine:
+    start: np.ndarray  # 3D end points, in the coordinates of the points given
+    end: np.ndarray
+    kind: str  # ridge (horizontal, convex), hip (sloped, convex), valley (concave), step (one face up, one down)
+    plane_a: int  # indices into the planes given
+    plane_b: int
+
+
+def roof_lines(xyz: np.ndarray, planes: list[Plane], link: float, min_angle_deg: float = 5.0,
+               horizontal_deg: float = 5.0) -> list[RoofLine]:
+    """Intersections of adjacent faces (their points within ``link`` in plan), clipped to where
+    both faces have points within ``link`` of the line. Kinds: a horizontal convex line is a ridge,
+    a sloped one a hip, a concave one a valley."""
+    if len(planes) < 2:
+        return []
+    centre = xyz.mean(axis=0)
+    p = xyz - centre
+    trees = [cKDTree(p[pl.indices, :2]) for pl in planes]
+    out = []
+    for a in range(len(planes)):
+        for b in range(a + 1, len(planes)):
+            na, nb = planes[a].normal, planes[b].normal
+            u = np.cross(na, nb)
+            if np.linalg.norm(u) < np.sin(np.radians(min_angle_deg)):
+                continue  # nearly parallel: a step between them, not an intersection
+            if trees[a].query(p[planes[b].indices, :2], distance_upper_bound=link)[0].min() > link:
+                continue
+            u /= np.linalg.norm(u)
+            if u[0] < 0 or (u[0] == 0 and u[1] < 0):
+                u = -u
+            da = planes[a].d - na @ centre
+            db = planes[b].d - nb @ centre
+            x0 = np.linalg.lstsq(np.vstack([na, nb, u]), np.array([da, db, 0.0]), rcond=None)[0]
+            spans = []
+            sides = []
+            for pl in (planes[a], planes[b]):
+                q = p[pl.indices] - x0
+                t = q @ u
+                off = q - t[:, None] * u
+                near = np.linalg.norm(off, axis=1) <= link
+                if near.sum() < 2:
+                    break
+                spans.append((t[near].min(), t[near].max()))
+                sides.append(off[near].mean(axis=0))
+            if len(spans) < 2:
+                continue
+            lo, hi = max(spans[0][0], spans[1][0]), min(spans[0][1], spans[1][1])
+            if hi - lo < link:
+                continue  # the faces meet at a corner only
+            down = [s[2] < 0 for s in sides]
+            if all(down):
+                kind = "ridge" if abs(u[2]) < np.sin(np.radians(horizontal_deg)) else "hip"
+            elif not any(down):
+                kind = "valley"
+            else:
+                kind = "step"
+            out.append(RoofLine(x0 + lo * u + centre, x0 + hi * u + centre, kind, a, b))
+    return out

@@ -59,7 +59,7 @@ def _run(inputs, params, ctx):
     import geopandas as gpd
     import numpy as np
     import shapely
-    from shapely.geometry import MultiPoint, Polygon
+    from shapely.geometry import LineString, MultiPoint, Polygon
 
     from . import core, reference
 
@@ -105,10 +105,17 @@ def _run(inputs, params, ctx):
         voter = TaichiVoter(ctx.taichi())
     plane_id = np.zeros(len(pc), np.int32)
     rows, geoms = [], []
+    line_rows, line_geoms = [], []
     next_id = 1
     for b, g in ctx.progress(groups, desc="roof-planes", unit="building"):
         planes = core.detect_planes(xyz[g], angle, rho, params["max_distance_m"] / hu, min_points, link, voter,
                                     normal_tol_deg=params["normal_tol_deg"] or None, min_width=link)
+        first_id = next_id
+        for ln in core.roof_lines(xyz[g], planes, link):
+            line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
+            line_rows.append({"kind": ln.kind, "building_id": int(b), "plane_a": first_id + ln.plane_a,
+                              "plane_b": first_id + ln.plane_b,
+                              "length_m": round(float(np.linalg.norm(ln.end - ln.start)) * hu, 3)})
         for pl in planes:
             members = g[pl.indices]
             plane_id[idx[members]] = next_id
@@ -133,13 +140,19 @@ def _run(inputs, params, ctx):
     else:
         gdf = gpd.GeoDataFrame({"plane_id": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     gdf.attrs["geometry_type"] = "Polygon Z"
+    if line_rows:
+        lines = gpd.GeoDataFrame(line_rows, geometry=line_geoms, crs=pc.crs)
+    else:
+        lines = gpd.GeoDataFrame({"kind": np.array([], str)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+    lines.attrs["geometry_type"] = "LineString Z"
     on_plane = int((plane_id > 0).sum())
     stats = {"source": source, "n_roof_points": int(len(idx)), "n_buildings": len(groups), "n_planes": next_id - 1,
              "points_on_planes": on_plane, "share_on_planes": round(on_plane / max(len(idx), 1), 4),
              "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
              "link_m_used": round(link * hu, 3), "accumulator_cells": len(reference.ball_cells(angle)),
              "seconds": round(time.perf_counter() - t0, 3)}
-    return toolbox.Result({"planes": {"roof_planes": gdf}, "classified": pc.with_fields(plane_id=plane_id)},
+    stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "step")}
+    return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},
                           stats=stats)
 
 
@@ -155,7 +168,8 @@ def toolbox_algorithms():
             "back; repeated while a cell holds min_points votes. Points then go to the nearest plane they touch, "
             "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped. Roof points: the file's class 6 (source=classified), buildings found by "
             "classify (detect), or the whole input as one roof (all); auto takes class 6 when the file has it. "
-            "Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
+            "Where two adjacent faces meet, their intersection clipped to both is a roof line (ridge, hip, valley, "
+            "step). Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
             "plane_id dimension (0: on no plane)."),
         reference=REFERENCE,
         parameters=[
@@ -181,7 +195,8 @@ def toolbox_algorithms():
         ],
         inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud (buildings as class 6, or one roof)")],
         outputs=[
-            Output("planes", "vector", "layer roof_planes: one PolygonZ per face", style="roof_planes"),
+            Output("planes", "vector", "layers roof_planes (one PolygonZ per face) and roof_lines (LineStringZ "
+                   "where adjacent faces meet: ridge, hip, valley or step)", style="roof_planes"),
             Output("classified", "points", "the input with plane_id (int32, 0 = on no plane)", suffix="_classified"),
         ],
     )]
