@@ -539,6 +539,143 @@ def print_machine_check(label: str, m: dict) -> None:
           flush=True)
 
 
+def _obj_edges(path: Path):
+    verts, edges = [], []
+    for line in path.read_text().splitlines():
+        f = line.split()
+        if f and f[0] == "v":
+            verts.append([float(v) for v in f[1:4]])
+        elif f and f[0] == "l":
+            edges.append((int(f[1]) - 1, int(f[2]) - 1))
+    v = np.array(verts)
+    return [(v[a], v[b]) for a, b in edges]
+
+
+def _edge_samples(edges, step=0.1):
+    pts, w = [], []
+    for a, b in edges:
+        n = max(int(np.linalg.norm(b - a) / step), 1)
+        pts.append(a + ((np.arange(n) + 0.5) / n)[:, None] * (b - a))
+        w.append(np.full(n, np.linalg.norm(b - a) / n))
+    return (np.concatenate(pts), np.concatenate(w)) if pts else (np.zeros((0, 3)), np.zeros(0))
+
+
+def _plane_picture(xy, plane_id, cell=0.25):
+    """Top view of points coloured by plane (grey: on no plane), uint8 RGB rows x cols x 3."""
+    c = ((xy[:, 0] - xy[:, 0].min()) / cell).astype(int)
+    r = ((xy[:, 1].max() - xy[:, 1]) / cell).astype(int)
+    img = np.full((r.max() + 1, c.max() + 1, 3), 255, np.uint8)
+    rng = np.random.default_rng(7)
+    colours = rng.integers(40, 230, (int(plane_id.max()) + 1, 3)).astype(np.uint8)
+    colours[0] = 150
+    lab = np.full(img.shape[:2], -1)
+    lab[r, c] = plane_id
+    # empty cells between the points take their nearest point's colour (up to 3 cells), then x3
+    from scipy import ndimage
+
+    dist, (ir, ic) = ndimage.distance_transform_edt(lab < 0, return_indices=True)
+    filled = np.where(dist <= 3, lab[ir, ic], -1)
+    img[filled >= 0] = colours[filled[filled >= 0]]
+    return np.repeat(np.repeat(img, 3, axis=0), 3, axis=1)
+
+
+def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
+    """roof-planes against truth: synthetic roofs (exact planes), RoofN3D (face labels), Vaihingen
+    (plane rms, and a picture to look at), Building3D Tallinn (reference wireframes)."""
+    import geopandas as gpd
+    from scipy.spatial import cKDTree
+
+    from toolbox.io.rasters import write_image
+    from toolbox_plugins.roofs.evaluation import plane_scores
+
+    print("\nroof-planes (3D Hough, ball accumulator), default parameters; no peer installed here (open3d's RANSAC "
+          "and CGAL's region growing are candidates)")
+    rows = []
+    for seed in (1, 2, 3):
+        scene = tmp / f"roofs{seed}.laz"
+        toolbox.run("synthetic-scene", output=scene, overwrite=True, kind="roofs", seed=seed)
+        t, rep = timed(lambda: toolbox.run("roof-planes", scene, tmp / "rp.gpkg", overwrite=True))
+        las = laspy.read(scene)
+        roof = np.asarray(las.classification) == 6
+        truth = np.where(roof, np.asarray(las.plane_id), 0)
+        pred = np.where(roof, np.asarray(laspy.read(tmp / "rp_classified.laz").plane_id), 0)
+        sc = plane_scores(truth, pred)
+        faces = {f["plane_id"]: f for f in json.loads((tmp / f"roofs{seed}_truth.json").read_text())["roof_planes"]}
+        errs = []
+        for r in gpd.read_file(tmp / "rp.gpkg", layer="roof_planes").itertuples():
+            ids, cnt = np.unique(truth[pred == r.plane_id], return_counts=True)
+            f = faces[int(ids[np.argmax(cnt)])]
+            n = np.array([r.normal_x, r.normal_y, r.normal_z])
+            errs.append((f["n_points"], np.degrees(np.arccos(min(1.0, abs(n @ np.array(f["normal"])))))))
+        errs = np.array(errs)
+        row = {"case": f"roof-planes synthetic roofs seed {seed}", "points": int(roof.sum()), "ours_s": t,
+               **{k: sc[k] for k in ("faces", "planes", "completeness", "correctness", "right_face_share")},
+               "normal_err_deg_max_faces_ge_200": float(errs[errs[:, 0] >= 200, 1].max()),
+               "normal_err_deg_max": float(errs[:, 1].max())}
+        rows.append(row)
+        print(f"  synthetic seed {seed}: {row['points']:,} roof points, {t:.2f} s; faces {sc['faces']}, planes "
+              f"{sc['planes']}, completeness {sc['completeness']:.3f}, correctness {sc['correctness']:.3f}, right face "
+              f"{sc['right_face_share']:.3f}; normal error max {row['normal_err_deg_max_faces_ge_200']:.2f} deg (faces "
+              f">= 200 points), {row['normal_err_deg_max']:.2f} deg (all)", flush=True)
+    files = sorted((SHARED / "roofn3d").glob("*/points/*.pts"))
+    if files:
+        comp, corr, tt = [], [], 0.0
+        for f in files:
+            lab = np.loadtxt(f.parent.parent / "points_label" / f"{f.stem}.seg", dtype=int)
+            t, _ = timed(lambda: toolbox.run("roof-planes", f, tmp / "rn.gpkg", overwrite=True, source="all",
+                                             crs="EPSG:32618"))
+            tt += t
+            sc = plane_scores(np.where(lab == 5, 0, lab), np.asarray(laspy.read(tmp / "rn_classified.laz").plane_id))
+            comp.append(sc["completeness"])
+            corr.append(sc["correctness"])
+        rows.append({"case": "roof-planes RoofN3D", "buildings": len(files), "ours_s": tt,
+                     "completeness": float(np.mean(comp)), "correctness": float(np.mean(corr))})
+        print(f"  RoofN3D, {len(files)} real buildings: completeness {np.mean(comp):.3f}, correctness "
+              f"{np.mean(corr):.3f} (>= 50 % shared both ways), {tt:.2f} s in all", flush=True)
+    else:
+        print("  (skipping RoofN3D: ../shared/data/roofn3d is absent)")
+    for f in sorted((SHARED / "vaihingen_roofs").glob("*.txt")):
+        t, rep = timed(lambda: toolbox.run("roof-planes", f, tmp / "vh.gpkg", overwrite=True, source="all",
+                                           crs="EPSG:32632"))
+        planes = gpd.read_file(tmp / "vh.gpkg", layer="roof_planes")
+        pc = laspy.read(tmp / "vh_classified.laz")
+        write_image(_plane_picture(np.column_stack([pc.x, pc.y]), np.asarray(pc.plane_id)),
+                    out_dir / f"vaihingen_{f.stem}_planes.png", overwrite=True)
+        rows.append({"case": f"roof-planes Vaihingen {f.stem}", "points": len(pc), "ours_s": t, "planes": len(planes),
+                     "rms_m_max": float(planes.rms_m.max()), "share_on_planes": rep["stats"]["share_on_planes"]})
+        print(f"  Vaihingen {f.stem}: {len(pc):,} points, {t:.2f} s, {len(planes)} planes, rms max "
+              f"{planes.rms_m.max():.3f} m, {rep['stats']['share_on_planes']:.2f} of the points on a plane "
+              f"(picture: bench-output/vaihingen_{f.stem}_planes.png)", flush=True)
+    objs = sorted((SHARED / "building3d_tallinn" / "xyz").glob("*.xyz"))
+    if objs:
+        cover = {"lines": [], "lines+faces": []}
+        near = {"lines": [], "lines+faces": []}
+        for f in objs:
+            ref = _obj_edges(f.parent.parent / "wireframe" / f"{f.stem}.obj")
+            toolbox.run("roof-planes", f, tmp / "tl.gpkg", overwrite=True, source="all", crs="EPSG:3301")
+            lines = [tuple(np.asarray(g.coords)[[0, -1]]) for g in gpd.read_file(tmp / "tl.gpkg", layer="roof_lines").geometry]
+            faces = []
+            for g in gpd.read_file(tmp / "tl.gpkg", layer="roof_planes").geometry:
+                c = np.asarray(g.exterior.coords)
+                faces += [(c[i], c[i + 1]) for i in range(len(c) - 1)]
+            rp, rw = _edge_samples(ref)
+            for key, ours in (("lines", lines), ("lines+faces", lines + faces)):
+                op, ow = _edge_samples(ours)
+                if not len(op):
+                    cover[key].append(0.0)
+                    near[key].append(0.0)
+                    continue
+                cover[key].append(float((rw * (cKDTree(op).query(rp)[0] <= 0.5)).sum() / rw.sum()))
+                near[key].append(float((ow * (cKDTree(rp).query(op)[0] <= 0.5)).sum() / ow.sum()))
+        for key in cover:
+            rows.append({"case": f"roof-planes Tallinn {key}", "roofs": len(objs),
+                         "reference_within_0_5m": float(np.mean(cover[key])), "ours_within_0_5m": float(np.mean(near[key]))})
+            print(f"  Building3D Tallinn, {len(objs)} roofs, {key}: {np.mean(cover[key]):.3f} of the reference edge "
+                  f"length within 0.5 m of ours, {np.mean(near[key]):.3f} of ours within 0.5 m of the reference",
+                  flush=True)
+    return rows
+
+
 def fmt(v, w=8, d=2):
     return f"{v:{w}.{d}f}" if isinstance(v, (int, float)) and v is not None else f"{'-':>{w}}"
 
@@ -568,7 +705,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small inputs only")
     ap.add_argument("--no-10m", action="store_true",
                     help="skip the large synthetic inputs (the 10-million-point tile, the 3 km corridor)")
-    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines"), action="append",
+    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines", "roofs"), action="append",
                     help="run only these sections (repeatable); results.json then holds only them")
     args = ap.parse_args(argv)
     out_dir = ROOT / "bench-output"
@@ -583,7 +720,7 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines"))
+        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines", "roofs"))
         if "ground" in want:
             rows += bench_ground(tmp, not args.no_10m, args.quick)
         if "isprs" in want:
@@ -594,6 +731,8 @@ def main(argv=None) -> int:
             rows += bench_hough(tmp)
         if "powerlines" in want:
             rows += bench_powerlines(tmp, large=not (args.no_10m or args.quick))
+        if "roofs" in want:
+            rows += bench_roofs(tmp, out_dir)
     check_end = machine_check()
     print_machine_check("end", check_end)
     rows.append({"case": "machine check", "start": check_start, "end": check_end})

@@ -71,9 +71,7 @@ def _run(inputs, params, ctx):
     idx = np.flatnonzero(roof)
     # isotropic coordinates in the horizontal unit (a survey in feet: z may be in other units)
     xyz = np.column_stack([pc.x[idx], pc.y[idx], pc.z[idx] * vu / hu])
-    if source == "all":
-        bid, n_b = np.ones(len(idx), np.int64), 1
-    elif len(idx):
+    if len(idx):
         bid, n_b = _buildings(xyz[:, 0], xyz[:, 1], BUILDING_CELL_M / hu)
     else:
         bid, n_b = np.zeros(0, np.int64), 0
@@ -167,7 +165,7 @@ def toolbox_algorithms():
             "connected patches (link_m), and each patch of min_points or more is a plane whose votes are taken "
             "back; repeated while a cell holds min_points votes. Points then go to the nearest plane they touch, "
             "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped. Roof points: the file's class 6 (source=classified), buildings found by "
-            "classify (detect), or the whole input as one roof (all); auto takes class 6 when the file has it. "
+            "classify (detect), or every point of the input (all); auto takes class 6 when the file has it. "
             "Where two adjacent faces meet, their intersection clipped to both is a roof line (ridge, hip, valley, "
             "step). Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
             "plane_id dimension (0: on no plane)."),
