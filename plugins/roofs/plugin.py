@@ -154,9 +154,150 @@ def _run(inputs, params, ctx):
                           stats=stats)
 
 
+def _run_edges(inputs, params, ctx):
+    import time
+
+    import geopandas as gpd
+    import numpy as np
+    from affine import Affine
+    from scipy import ndimage
+    from shapely.geometry import LineString
+
+    from toolbox.io.rasters import Raster
+
+    from . import edges
+
+    pc = inputs["points"]
+    pc.require_points("building-edges", 3)
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    t0 = time.perf_counter()
+    cell = params["cell_size_m"] / hu
+    cls = pc.classification
+    # heights above the terrain: the file's ground when it has one, else the ground filter's
+    has_ground = cls is not None and np.any(cls == 2)
+    dres = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0)
+    dtm = dres.outputs["dtm"]
+    from toolbox_plugins.morph_dtm.core import Grid, bilinear
+
+    surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
+    g = Grid(dtm.transform.c, dtm.transform.f, dtm.transform.a, *dtm.data.shape)
+    height = (pc.z - bilinear(g, surface, pc.x, pc.y)) * vu / hu
+    source = params["source"]
+    if source == "auto":
+        source = "classified" if cls is not None and np.any(cls == 6) else "height"
+    if source == "classified":
+        if cls is None or not np.any(cls == 6):
+            raise DataError(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
+        roof = cls == 6
+    elif source == "detect":
+        roof = np.asarray(ctx.call("classify", {"points": pc}).outputs["classified"].classification) == 6
+    else:  # the method: last returns above a height threshold
+        last = np.ones(len(pc), bool)
+        if "return_number" in pc.fields and "number_of_returns" in pc.fields:
+            last = np.asarray(pc.fields["return_number"]) == np.asarray(pc.fields["number_of_returns"])
+        roof = last & (height >= params["min_height_m"] / hu)
+    idx = np.flatnonzero(roof)
+    if len(idx) < 3:
+        raise DataError(f"input {pc.source!r}: no building points found (source={source}); check min_height_m or "
+                        "the classes")
+    x, y = pc.x[idx], pc.y[idx]
+    west, north, rows, cols = edges.mask_grid(x, y, cell)
+    mask = edges.clean_mask(edges.rasterise(x, y, west, north, rows, cols, cell))
+    if source == "height" and params["erosions"] > 0:
+        # the method's erosions take off what is narrower than a building (crowns, hedges); the same
+        # number of dilations gives the buildings their size back
+        k = params["erosions"]
+        mask = ndimage.binary_dilation(ndimage.binary_erosion(mask, iterations=k), iterations=k) & mask
+    lab, n_lab = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    c = np.clip(((x - west) / cell).astype(np.int64), 0, cols - 1)
+    r = np.clip(((north - y) / cell).astype(np.int64), 0, rows - 1)
+    pt_lab = lab[r, c]
+    transform = Affine(cell, 0, west, 0, -cell, north)
+    min_area = params["min_area_m2"] / (hu * hu)
+    out_rows, out_geoms, e_rows, e_geoms = [], [], [], []
+    bid = 0
+    sizes = np.bincount(lab.ravel(), minlength=n_lab + 1)
+    for b in ctx.progress(range(1, n_lab + 1), desc="building-edges", unit="building"):
+        if sizes[b] * cell * cell < min_area:
+            continue
+        members = np.flatnonzero(pt_lab == b)
+        if len(members) < 3:
+            continue
+        comp = lab == b
+        rr, cc = np.nonzero(comp)
+        r0, r1, c0, c1 = max(rr.min() - 2, 0), rr.max() + 3, max(cc.min() - 2, 0), cc.max() + 3
+        edge = edges.edge_pixels(comp[r0:r1, c0:c1])
+        lines = []
+        if edge.sum() >= 4:
+            img = Raster(edge.astype(np.uint8), transform @ Affine.translation(c0, r0), crs=pc.crs)
+            try:
+                res = ctx.call("hough-lines-raster", {"image": img}, theta_step_deg=0.5, rho_step_m=params["cell_size_m"],
+                               band_m=params["cell_size_m"], min_votes=max(4, int(round(2.0 / params["cell_size_m"]))),
+                               s_min_m=2.0, v_max_m=2 * params["cell_size_m"], tile_size_m=0.0)
+                found = res.outputs["lines"]["conductors"]
+            except DataError:
+                found = []
+            for row in (found.itertuples() if len(found) else []):
+                xy = np.asarray(row.geometry.coords)
+                lines.append((float(np.arctan2(xy[-1, 1] - xy[0, 1], xy[-1, 0] - xy[0, 0])), float(row.votes)))
+                e_geoms.append(LineString(xy))
+                e_rows.append({"building_id": bid + 1, "votes": int(row.votes),
+                               "length_m": round(float(row.geometry.length) * hu, 3)})
+        direction = edges.refine_direction(x[members], y[members], edges.dominant_direction(lines))
+        poly = edges.regular_outline(x[members], y[members], direction, cell, min_area=min_area)
+        if poly is None:
+            continue
+        bid += 1
+        hb = height[idx[members]]
+        out_geoms.append(poly)
+        out_rows.append({"building_id": bid, "area_m2": round(float(poly.area) * hu * hu, 2),
+                         "height_m": round(float(np.percentile(hb, 95)) * hu, 2), "n_points": int(len(members)),
+                         "direction_deg": round(float(np.degrees(direction)), 2), "n_edges": len(lines)})
+    def frame(rows_, geoms_, kind):
+        if rows_:
+            f = gpd.GeoDataFrame(rows_, geometry=geoms_, crs=pc.crs)
+        else:
+            f = gpd.GeoDataFrame({"building_id": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs),
+                                 crs=pc.crs)
+        f.attrs["geometry_type"] = kind
+        return f
+
+    layers = {"building_outlines": frame(out_rows, out_geoms, "Polygon"), "roof_edges": frame(e_rows, e_geoms, "LineString")}
+    # a building outline may come out in parts (a MultiPolygon): GeoPackage layers hold one type
+    layers["building_outlines"] = layers["building_outlines"].explode(index_parts=False).reset_index(drop=True)
+    layers["building_outlines"].attrs["geometry_type"] = "Polygon"
+    return toolbox.Result({"outlines": layers}, stats={"source": source, "n_buildings": bid, "n_edges": len(e_rows),
+                                                     "seconds": round(time.perf_counter() - t0, 3)})
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     return [Algorithm(
+        id="building-edges", title="Building outlines (raster edges, 2D Hough, regularised)", run=_run_edges,
+        description=(
+            "The method's raster route: building cells on a grid (the file's class 6, buildings found by classify, "
+            "or, as the method, last returns above min_height_m with erosions taking off what is narrower than a "
+            "building), the edge pixels (the mask minus its erosion) of each building into the 2D Hough "
+            "(hough-lines-raster, through the host), and an outline regularised to the building's dominant "
+            "direction (the vote-weighted direction of its Hough lines, walls at right angles are one direction): "
+            "the building's points rasterised again in a frame turned to it, so walls come out straight and "
+            "corners square. Layers building_outlines (Polygon: area, height above the terrain, points, "
+            "direction) and roof_edges (the Hough lines)."),
+        reference=REFERENCE,
+        parameters=[
+            Parameter("source", str, "auto", "building cells from the file's class 6 (classified), from classify "
+                      "(detect), or from last-return heights (height, the method); auto: classified when the file "
+                      "has class 6, else height", choices=("auto", "classified", "detect", "height")),
+            Parameter("cell_size_m", float, 0.5, "cell of the building mask", unit="m", minimum=0.05, maximum=10.0),
+            Parameter("min_height_m", float, 2.5, "source=height: lowest building cell above the terrain", unit="m",
+                      minimum=0.0, maximum=500.0),
+            Parameter("erosions", int, 2, "source=height: erosions (then as many dilations) that take off "
+                      "vegetation", unit="cells", minimum=0, maximum=50),
+            Parameter("min_area_m2", float, 10.0, "smallest building", unit="m2", minimum=0.0, maximum=1e7),
+        ],
+        inputs=[Input("points", "points", "LAS/LAZ point cloud")],
+        outputs=[Output("outlines", "vector", "layers building_outlines and roof_edges", style="building_outlines")],
+    ), Algorithm(
         id="roof-planes", title="Roof planes (3D Hough, ball accumulator)", run=_run,
         description=(
             "Every roof point votes for the planes through it, ρ = x·cosθ·cosφ + y·sinθ·cosφ + z·sinφ, in a ball "
