@@ -173,19 +173,23 @@ def _run_edges(inputs, params, ctx):
     t0 = time.perf_counter()
     cell = params["cell_size_m"] / hu
     cls = pc.classification
-    # heights above the terrain: the file's ground when it has one, else the ground filter's
-    has_ground = cls is not None and np.any(cls == 2)
-    dres = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0)
-    dtm = dres.outputs["dtm"]
-    from toolbox_plugins.morph_dtm.core import Grid, bilinear
-
-    surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
-    g = Grid(dtm.transform.c, dtm.transform.f, dtm.transform.a, *dtm.data.shape)
-    height = (pc.z - bilinear(g, surface, pc.x, pc.y)) * vu / hu
     source = params["source"]
+    height = None
+    if source != "all":
+        # heights above the terrain: the file's ground when it has one, else the ground filter's
+        has_ground = cls is not None and np.any(cls == 2)
+        dres = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0)
+        dtm = dres.outputs["dtm"]
+        from toolbox_plugins.morph_dtm.core import Grid, bilinear
+
+        surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
+        g = Grid(dtm.transform.c, dtm.transform.f, dtm.transform.a, *dtm.data.shape)
+        height = (pc.z - bilinear(g, surface, pc.x, pc.y)) * vu / hu
     if source == "auto":
         source = "classified" if cls is not None and np.any(cls == 6) else "height"
-    if source == "classified":
+    if source == "all":
+        roof = np.ones(len(pc), bool)
+    elif source == "classified":
         if cls is None or not np.any(cls == 6):
             raise DataError(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
         roof = cls == 6
@@ -248,10 +252,10 @@ def _run_edges(inputs, params, ctx):
         if poly is None:
             continue
         bid += 1
-        hb = height[idx[members]]
         out_geoms.append(poly)
+        hb = float(np.percentile(height[idx[members]], 95)) * hu if height is not None else None
         out_rows.append({"building_id": bid, "area_m2": round(float(poly.area) * hu * hu, 2),
-                         "height_m": round(float(np.percentile(hb, 95)) * hu, 2), "n_points": int(len(members)),
+                         "height_m": round(hb, 2) if hb is not None else None, "n_points": int(len(members)),
                          "direction_deg": round(float(np.degrees(direction)), 2), "n_edges": len(lines)})
     def frame(rows_, geoms_, kind):
         if rows_:
@@ -286,8 +290,9 @@ def toolbox_algorithms():
         reference=REFERENCE,
         parameters=[
             Parameter("source", str, "auto", "building cells from the file's class 6 (classified), from classify "
-                      "(detect), or from last-return heights (height, the method); auto: classified when the file "
-                      "has class 6, else height", choices=("auto", "classified", "detect", "height")),
+                      "(detect), from last-return heights (height, the method), or every point (all: a roof-only "
+                      "cut-out; no height above the terrain then); auto: classified when the file has class 6, else "
+                      "height", choices=("auto", "classified", "detect", "height", "all")),
             Parameter("cell_size_m", float, 0.5, "cell of the building mask", unit="m", minimum=0.05, maximum=10.0),
             Parameter("min_height_m", float, 2.5, "source=height: lowest building cell above the terrain", unit="m",
                       minimum=0.0, maximum=500.0),
