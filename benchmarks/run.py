@@ -658,7 +658,19 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
             for g in gpd.read_file(tmp / "tl.gpkg", layer="roof_planes").geometry:
                 c = np.asarray(g.exterior.coords)
                 faces += [(c[i], c[i + 1]) for i in range(len(c) - 1)]
+            toolbox.run("building-edges", f, tmp / "tb.gpkg", overwrite=True, source="all", crs="EPSG:3301")
+            outl = []
+            for g in gpd.read_file(tmp / "tb.gpkg", layer="building_outlines").geometry:
+                c = np.asarray(g.exterior.coords)
+                outl += [(c[i], c[i + 1]) for i in range(len(c) - 1)]
             rp, rw = _edge_samples(ref)
+            flat = [(np.r_[a[:2], 0.0], np.r_[b[:2], 0.0]) for a, b in lines + outl]
+            ref2 = [(np.r_[a[:2], 0.0], np.r_[b[:2], 0.0]) for a, b in ref]
+            rp2, rw2 = _edge_samples(ref2)
+            op2, ow2 = _edge_samples(flat)
+            key = "lines+outlines, plan"
+            cover.setdefault(key, []).append(float((rw2 * (cKDTree(op2).query(rp2)[0] <= 0.5)).sum() / rw2.sum()))
+            near.setdefault(key, []).append(float((ow2 * (cKDTree(rp2).query(op2)[0] <= 0.5)).sum() / ow2.sum()))
             for key, ours in (("lines", lines), ("lines+faces", lines + faces)):
                 op, ow = _edge_samples(ours)
                 if not len(op):
@@ -673,6 +685,49 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
             print(f"  Building3D Tallinn, {len(objs)} roofs, {key}: {np.mean(cover[key]):.3f} of the reference edge "
                   f"length within 0.5 m of ours, {np.mean(near[key]):.3f} of ours within 0.5 m of the reference",
                   flush=True)
+    rows += _bench_outlines(tmp)
+    return rows
+
+
+def _bench_outlines(tmp: Path) -> list[dict]:
+    """building-edges: outlines against the synthetic footprints and AHN3's BAG footprints (IoU)."""
+    import csv
+
+    import geopandas as gpd
+    from shapely import union_all
+    from shapely.geometry import Polygon, box
+
+    rows = []
+    for seed in (1, 2, 3):
+        scene = tmp / f"roofs{seed}.laz"
+        t, _ = timed(lambda: toolbox.run("building-edges", scene, tmp / "be.gpkg", overwrite=True))
+        truth = gpd.read_file(tmp / f"roofs{seed}_truth.gpkg", layer="truth_buildings")
+        ours = gpd.read_file(tmp / "be.gpkg", layer="building_outlines")
+        ious = []
+        for g in truth.geometry:
+            cand = ours[ours.intersects(g)]
+            u = cand.geometry.union_all() if len(cand) else None
+            ious.append(u.intersection(g).area / u.union(g).area if u is not None else 0.0)
+        rows.append({"case": f"building-edges synthetic seed {seed}", "ours_s": t, "buildings": len(truth),
+                     "outlines": len(ours), "iou_median": float(np.median(ious)), "iou_min": float(np.min(ious))})
+        print(f"  building-edges synthetic seed {seed}: {len(ours)} outlines for {len(truth)} buildings, IoU median "
+              f"{np.median(ious):.3f}, min {np.min(ious):.3f}, {t:.2f} s", flush=True)
+    las = SHARED / "ahn3_amsterdam" / "ahn_2386_9702.laz"
+    bag_csv = SHARED / "ahn3_amsterdam" / "bag_buildings_demo.csv"
+    if las.exists() and bag_csv.exists():
+        t, _ = timed(lambda: toolbox.run("building-edges", las, tmp / "ba.gpkg", overwrite=True, crs="EPSG:28992"))
+        tile = box(*read_points(las, crs="EPSG:28992").bounds())
+        bag = [Polygon(json.loads(r["polygon"])).intersection(tile) for r in csv.DictReader(bag_csv.open())]
+        bag = [p for p in bag if p.area > 5]
+        ious = []
+        for g in gpd.read_file(tmp / "ba.gpkg", layer="building_outlines").geometry:
+            mine = [p for p in bag if p.intersection(g).area >= 0.5 * p.area]  # BAG units (pand) of this block
+            ref = union_all(mine) if mine else None
+            ious.append(ref.intersection(g).area / ref.union(g).area if ref is not None else 0.0)
+        rows.append({"case": "building-edges AHN3 vs BAG", "ours_s": t, "iou_median": float(np.median(ious)),
+                     "ious": ious})
+        print(f"  building-edges AHN3 Amsterdam against BAG footprints: IoU {', '.join(f'{v:.3f}' for v in ious)} "
+              f"(median {np.median(ious):.3f}), {t:.2f} s", flush=True)
     return rows
 
 
