@@ -591,9 +591,10 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
     print("\nroof-planes (3D Hough, ball accumulator), default parameters; no peer installed here (open3d's RANSAC "
           "and CGAL's region growing are candidates)")
     rows = []
-    for seed in (1, 2, 3):
+    for seed in (1, 2, 3, "all-1"):
         scene = tmp / f"roofs{seed}.laz"
-        toolbox.run("synthetic-scene", output=scene, overwrite=True, kind="roofs", seed=seed)
+        extra = {"roof_set": "all", "seed": 1} if seed == "all-1" else {"seed": seed}
+        toolbox.run("synthetic-scene", output=scene, overwrite=True, kind="roofs", **extra)
         t, rep = timed(lambda: toolbox.run("roof-planes", scene, tmp / "rp.gpkg", overwrite=True))
         las = laspy.read(scene)
         roof = np.asarray(las.classification) == 6
@@ -613,7 +614,7 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
                "normal_err_deg_max_faces_ge_200": float(errs[errs[:, 0] >= 200, 1].max()),
                "normal_err_deg_max": float(errs[:, 1].max())}
         rows.append(row)
-        print(f"  synthetic seed {seed}: {row['points']:,} roof points, {t:.2f} s; faces {sc['faces']}, planes "
+        print(f"  synthetic {'roof_set=all seed 1, 12 buildings' if seed == 'all-1' else f'seed {seed}'}: {row['points']:,} roof points, {t:.2f} s; faces {sc['faces']}, planes "
               f"{sc['planes']}, completeness {sc['completeness']:.3f}, correctness {sc['correctness']:.3f}, right face "
               f"{sc['right_face_share']:.3f}; normal error max {row['normal_err_deg_max_faces_ge_200']:.2f} deg (faces "
               f">= 200 points), {row['normal_err_deg_max']:.2f} deg (all)", flush=True)
@@ -698,7 +699,7 @@ def _bench_outlines(tmp: Path) -> list[dict]:
     from shapely.geometry import Polygon, box
 
     rows = []
-    for seed in (1, 2, 3):
+    for seed in (1, 2, 3, "all-1"):
         scene = tmp / f"roofs{seed}.laz"
         t, _ = timed(lambda: toolbox.run("building-edges", scene, tmp / "be.gpkg", overwrite=True))
         truth = gpd.read_file(tmp / f"roofs{seed}_truth.gpkg", layer="truth_buildings")

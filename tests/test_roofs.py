@@ -220,3 +220,18 @@ def test_a_curved_wall_is_not_a_staircase():
 
     half = Point(0, 0).buffer(12.0, 256).intersection(box(-13, 0, 13, 13))
     assert edges.iou(poly, half) > 0.95 and edges.stair_share(poly, 1.25) < 0.3
+
+
+def test_pyramid_shed_mansard_and_gambrel_roofs(tmp_path):
+    toolbox.run("synthetic-scene", output=tmp_path / "a.laz", kind="roofs", seed=1, roof_set="all")
+    toolbox.run("roof-planes", tmp_path / "a.laz", tmp_path / "p.gpkg")
+    las = laspy.read(tmp_path / "a.laz")
+    roof = np.asarray(las.classification) == 6
+    truth = np.where(roof, np.asarray(las.plane_id), 0)
+    pred = np.where(roof, np.asarray(laspy.read(tmp_path / "p_classified.laz").plane_id), 0)
+    s = plane_scores(truth, pred)
+    assert s["faces"] >= 38 and s["completeness"] == 1.0 and s["correctness"] >= 0.95, s  # 12 buildings
+    assert s["right_face_share"] >= 0.97, s
+    meta = json.loads((tmp_path / "a_truth.json").read_text())
+    kinds = {b["roof"] for b in meta["buildings"]}
+    assert {"pyramid", "shed", "mansard", "gambrel"} <= kinds

@@ -37,7 +37,8 @@ def _run(inputs, params, ctx):
     scene = make_scene(params["kind"], params["seed"], params["density_ppm2"], params["noise_m"], W, H,
                        params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"],
                        line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"],
-                       bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"])
+                       bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"],
+                       roof_set=params["roof_set"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -96,6 +97,8 @@ def toolbox_algorithms():
                       "triangle; 4 a square)", minimum=1, maximum=4),
             Parameter("bundle_spacing_m", float, 0.6, "double-circuit: the distance between sub-conductors",
                       unit="m", minimum=0.2, maximum=2.0),
+            Parameter("roof_set", str, "basic", "roofs: the buildings (basic: gable, hip, hip with a dormer, flat; all: "
+                      "also pyramid, shed, mansard and gambrel, on a 240 x 170 m scene)", choices=("basic", "all")),
         ],
         inputs=[],
         outputs=[

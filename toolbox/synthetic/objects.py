@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer")
+ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer", "pyramid", "shed", "mansard", "gambrel")
 
 
 # ------------------------------------------------------------------------------------------
@@ -39,6 +39,8 @@ class Building:
     base_z: float = 0.0  # absolute height of the eave reference (set by the scene)
     faces: list = field(default_factory=list)
     dormer: tuple | None = None  # (a0, width, b_front, ridge_z_rel, pitch_deg)
+    upper_pitch_deg: float = 0.0  # mansard and gambrel: the shallow upper faces' pitch ...
+    break_inset_m: float = 0.0  # ... above a break this far in from the eaves (plan)
 
     def to_ab(self, u, v):
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
@@ -72,7 +74,21 @@ class Building:
             return
         if self.roof == "gable":
             faces = [RoofFace("south", z + t * W, 0.0, t, None), RoofFace("north", z + t * W, 0.0, -t, None)]
-        else:  # hip and hip_dormer: equal pitch on all four faces
+        elif self.roof == "shed":  # one face rising from the b = -W eave
+            faces = [RoofFace("shed", z + t * W, 0.0, t, None)]
+        elif self.roof in ("mansard", "gambrel"):
+            # steep lower faces up to a break, shallow upper ones above it: still the lowest of the
+            # planes everywhere (a convex roof); the gambrel on the long sides only, gable ends
+            t2, d = np.tan(np.radians(self.upper_pitch_deg)), self.break_inset_m
+            zb = z + t * d
+            faces = [RoofFace("south_lower", z + t * W, 0.0, t, None), RoofFace("north_lower", z + t * W, 0.0, -t, None),
+                     RoofFace("south_upper", zb + t2 * (W - d), 0.0, t2, None),
+                     RoofFace("north_upper", zb + t2 * (W - d), 0.0, -t2, None)]
+            if self.roof == "mansard":
+                faces += [RoofFace("west_lower", z + t * L, t, 0.0, None), RoofFace("east_lower", z + t * L, -t, 0.0, None),
+                          RoofFace("west_upper", zb + t2 * (L - d), t2, 0.0, None),
+                          RoofFace("east_upper", zb + t2 * (L - d), -t2, 0.0, None)]
+        else:  # hip, hip_dormer and pyramid: equal pitch on all four faces
             faces = [
                 RoofFace("south", z + t * W, 0.0, t, None),  # b<0 side, rises towards b=0
                 RoofFace("north", z + t * W, 0.0, -t, None),

@@ -24,6 +24,7 @@ from .objects import (
 from .terrain import Terrain, _line_frame
 
 KINDS = ("corridor", "terrain", "roofs")
+ROOF_SETS = ("basic", "all")  # all: also pyramid, shed, mansard and gambrel roofs (kind=roofs)
 DEFAULT_EXTENT = {"corridor": (600.0, 250.0), "terrain": (400.0, 300.0), "roofs": (160.0, 120.0)}
 
 # ASPRS classes used here
@@ -82,10 +83,13 @@ LINE_VARIANTS = ("double-circuit", "ribbon", "distribution")
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
                width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
                origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
-               phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6) -> Scene:
+               phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6,
+               roof_set: str = "basic") -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
-    W, H = DEFAULT_EXTENT[kind]
+    if roof_set not in ROOF_SETS:
+        raise ValueError(f"roof_set must be one of {ROOF_SETS}")
+    W, H = DEFAULT_EXTENT[kind] if roof_set == "basic" or kind != "roofs" else (240.0, 170.0)
     W = float(width_m or W)
     H = float(height_m or H)
     rng = np.random.default_rng(seed)
@@ -104,7 +108,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         lines = _distribution_lines(W, H, rng, terrain)
     else:
         lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m)
-    buildings = _place_buildings(kind, W, H, rng, terrain, lines)
+    buildings = _place_buildings(kind, W, H, rng, terrain, lines, roof_set)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
 
     pts = _Points()
@@ -399,11 +403,13 @@ def _line_distance(u, v, line):
     return np.abs(_line_frame(u, v, p[0], p[1], p[0] + d[0], p[1] + d[1])[0])
 
 
-def _place_buildings(kind, W, H, rng, terrain, lines):
+def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
     specs = []
     if kind == "roofs":
         specs = [("hip_dormer", 16.0, 11.0), ("hip", 14.0, 10.0), ("gable", 12.0, 9.0), ("flat", 22.0, 14.0),
                  ("gable", 30.0, 18.0), ("hip", 11.0, 9.0), ("flat", 5.0, 4.0), ("gable", 9.0, 7.0)]
+        if roof_set == "all":
+            specs += [("pyramid", 10.0, 10.0), ("shed", 12.0, 8.0), ("mansard", 16.0, 12.0), ("gambrel", 14.0, 10.0)]
     else:
         specs = [("hip_dormer", 16.0, 11.0), ("flat", 60.0, 40.0), ("gable", 34.0, 20.0), ("hip", 14.0, 10.0),
                  ("gable", 12.0, 9.0), ("hip", 12.0, 9.5), ("gable", 10.0, 8.0), ("flat", 18.0, 12.0),
@@ -439,12 +445,20 @@ def _place_buildings(kind, W, H, rng, terrain, lines):
         else:
             continue
         eave = {"flat": rng.uniform(3.0, 10.0) if L > 15 else rng.uniform(2.4, 3.5),
-                "gable": rng.uniform(3.0, 8.0), "hip": rng.uniform(4.0, 7.0), "hip_dormer": 6.0}[roof]
+                "gable": rng.uniform(3.0, 8.0), "hip": rng.uniform(4.0, 7.0), "hip_dormer": 6.0}[roof] \
+            if roof in ("flat", "gable", "hip", "hip_dormer") else float(rng.uniform(3.0, 6.0))
         if L <= 5:
             eave = rng.uniform(2.3, 3.0)
         b.eave_m = float(eave)
-        b.pitch_deg = {"flat": 0.0, "gable": rng.uniform(25, 42) if L < 20 else rng.uniform(12, 20),
-                       "hip": rng.uniform(28, 40), "hip_dormer": 35.0}[roof]
+        if roof in ("flat", "gable", "hip", "hip_dormer"):
+            b.pitch_deg = {"flat": 0.0, "gable": rng.uniform(25, 42) if L < 20 else rng.uniform(12, 20),
+                           "hip": rng.uniform(28, 40), "hip_dormer": 35.0}[roof]
+        elif roof in ("pyramid", "shed"):
+            b.pitch_deg = float(rng.uniform(20, 35) if roof == "pyramid" else rng.uniform(8, 18))
+        else:  # mansard, gambrel: steep below the break, shallow above
+            b.pitch_deg = float(rng.uniform(55, 70))
+            b.upper_pitch_deg = float(rng.uniform(15, 30))
+            b.break_inset_m = float(rng.uniform(1.2, 2.0))
         fpx = np.vstack([b.footprint_uv(), [[cu, cv]]])
         b.base_z = float(terrain.height(fpx[:, 0], fpx[:, 1]).max())
         if roof == "hip_dormer":
