@@ -54,3 +54,11 @@ def tune_allocator() -> bool:
                                              (M_TOP_PAD, TOP_PAD_BYTES)))
     _state["applied"] = ok
     return ok
+
+
+def total_ram_bytes() -> int:
+    """This machine's physical memory (8 GiB where the system does not say)."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30

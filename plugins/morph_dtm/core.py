@@ -420,7 +420,9 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
         if accel is not None:
             return accel.near_surface(g, x, y, z, surface, surface_slope(surface, g.cell), ground_threshold,
                                       slope_factor, low_outlier)
-        sample = samplers.setdefault(id(g), Sampler(g, x, y))
+        if id(g) not in samplers:
+            samplers[id(g)] = Sampler(g, x, y)
+        sample = samplers[id(g)]
         return _near_surface(sample, g.cell, surface, z, ground_threshold, slope_factor, low_outlier)
 
     ground, dz = near(grid, provisional)
@@ -428,14 +430,14 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     surface, surface_grid = provisional, grid
     if refine:
         fine_cell = refine_cell if refine_cell is not None else refine_cell_size(spacing, cell, min_refine_cell)
-        fine = Grid.around(x, y, fine_cell)
+        fine = grid if fine_cell == cell else Grid.around(x, y, fine_cell)
         # the surface fitted to the ground points (a plane per cell) follows the terrain between
         # cell minima; once more on a grid matched to the point spacing, which follows breaklines.
         # What a pass adds on a raised object never supports the next: at a bridge's end the deck
         # continues the road, and each pass would climb further onto it
         off_raised = None if raised_cells is None else ~raised_cells.ravel()[flat]
         support = ground
-        passes = ((grid, domain), (fine, None))
+        passes = ((grid, domain), (fine, domain if fine is grid else None))
         if fine.cell <= 0.5 * cell:
             # dense points: the fine grid's blocks hold plenty to start from the provisional surface,
             # and the pass on the filter grid changed nothing measurable but cost a pass over them

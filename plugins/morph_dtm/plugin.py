@@ -64,13 +64,9 @@ BYTES_PER_CELL = 320  # the DTM fit holds about 40 float64 grids at once
 
 def _max_cells() -> int:
     """Grids may take half of the machine's memory."""
-    import os
+    from toolbox.memory import total_ram_bytes
 
-    try:
-        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        total = 8 << 30
-    return int(min(MAX_CELLS, 0.5 * total / BYTES_PER_CELL))
+    return int(min(MAX_CELLS, 0.5 * total_ram_bytes() / BYTES_PER_CELL))
 
 
 def _ground_and_noise(pc, params, accel=None):

@@ -13,15 +13,6 @@ BUILDING_CELL_M = 1.0  # buildings are the 8-connected groups of 1 m cells holdi
 RAM_SHARE = 0.25  # default accumulator budget: this share of the machine's memory
 
 
-def _ram_bytes() -> int:
-    import os
-
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
-
-
 def _buildings(x, y, cell):
     """Building number per point (1..n): 8-connected groups of occupied ``cell`` cells."""
     import numpy as np
@@ -83,8 +74,10 @@ def _run(inputs, params, ctx):
     groups = [order[bounds[b]:bounds[b + 1]] for b in range(n_b)]
     groups = [(b + 1, g) for b, g in enumerate(groups) if len(g) >= min_points]
     # the accumulator of the largest building, before anything is allocated
+    from toolbox.memory import total_ram_bytes
+
     budget = (params["max_accumulator_mb"] * 2**20 if params["max_accumulator_mb"] is not None
-              else RAM_SHARE * _ram_bytes())
+              else RAM_SHARE * total_ram_bytes())
     for b, g in groups:
         p = xyz[g] - xyz[g].mean(axis=0)
         radius = float(np.sqrt((p * p).sum(axis=1).max()))
@@ -178,13 +171,8 @@ def _run_edges(inputs, params, ctx):
     if source != "all":
         # heights above the terrain: the file's ground when it has one, else the ground filter's
         has_ground = cls is not None and np.any(cls == 2)
-        dres = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0)
-        dtm = dres.outputs["dtm"]
-        from toolbox_plugins.morph_dtm.core import Grid, bilinear
-
-        surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
-        g = Grid(dtm.transform.c, dtm.transform.f, dtm.transform.a, *dtm.data.shape)
-        height = (pc.z - bilinear(g, surface, pc.x, pc.y)) * vu / hu
+        dtm = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0).outputs["dtm"]
+        height = (pc.z - dtm.sample(pc.x, pc.y)) * vu / hu
     if source == "auto":
         source = "classified" if cls is not None and np.any(cls == 6) else "height"
     if source == "all":
@@ -221,17 +209,19 @@ def _run_edges(inputs, params, ctx):
     out_rows, out_geoms, e_rows, e_geoms = [], [], [], []
     bid = 0
     sizes = np.bincount(lab.ravel(), minlength=n_lab + 1)
+    boxes = ndimage.find_objects(lab)
+    order = np.argsort(pt_lab, kind="stable")
+    first = np.searchsorted(pt_lab[order], np.arange(n_lab + 2))
     for b in ctx.progress(range(1, n_lab + 1), desc="building-edges", unit="building"):
         if sizes[b] * cell * cell < min_area:
             continue
-        members = np.flatnonzero(pt_lab == b)
+        members = order[first[b]:first[b + 1]]
         if len(members) < 3:
             continue
-        comp = lab == b
-        rr, cc = np.nonzero(comp)
-        r0, r1, c0, c1 = max(rr.min() - 2, 0), rr.max() + 3, max(cc.min() - 2, 0), cc.max() + 3
-        edge = edges.edge_pixels(comp[r0:r1, c0:c1])
-        lines = []
+        rs, cs = boxes[b - 1]
+        r0, r1, c0, c1 = max(rs.start - 2, 0), rs.stop + 2, max(cs.start - 2, 0), cs.stop + 2
+        edge = edges.edge_pixels(lab[r0:r1, c0:c1] == b)
+        lines, my_edges = [], []
         if edge.sum() >= 4:
             img = Raster(edge.astype(np.uint8), transform @ Affine.translation(c0, r0), crs=pc.crs)
             try:
@@ -244,14 +234,15 @@ def _run_edges(inputs, params, ctx):
             for row in (found.itertuples() if len(found) else []):
                 xy = np.asarray(row.geometry.coords)
                 lines.append((float(np.arctan2(xy[-1, 1] - xy[0, 1], xy[-1, 0] - xy[0, 0])), float(row.votes)))
-                e_geoms.append(LineString(xy))
-                e_rows.append({"building_id": bid + 1, "votes": int(row.votes),
-                               "length_m": round(float(row.geometry.length) * hu, 3)})
+                my_edges.append((LineString(xy), int(row.votes), round(float(row.geometry.length) * hu, 3)))
         direction = edges.refine_direction(x[members], y[members], edges.dominant_direction(lines))
         poly = edges.regular_outline(x[members], y[members], direction, cell, min_area=min_area)
         if poly is None:
             continue
         bid += 1
+        for line, votes, length in my_edges:  # only a building with an outline keeps its edges
+            e_geoms.append(line)
+            e_rows.append({"building_id": bid, "votes": votes, "length_m": length})
         out_geoms.append(poly)
         hb = float(np.percentile(height[idx[members]], 95)) * hu if height is not None else None
         out_rows.append({"building_id": bid, "area_m2": round(float(poly.area) * hu * hu, 2),
