@@ -21,6 +21,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+import roof_peers
 import toolbox
 from toolbox.io.points import read_points
 from toolbox_plugins.morph_dtm.evaluation import ground_errors
@@ -588,24 +589,30 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
     from toolbox.io.rasters import write_image
     from toolbox_plugins.roofs.evaluation import plane_scores
 
-    print("\nroof-planes (3D Hough, ball accumulator), default parameters; no peer installed here (open3d's RANSAC "
-          "and CGAL's region growing are candidates)")
+    print("\nroof-planes (3D Hough, ball accumulator), default parameters; peers on the same buildings' points")
+    peers_ok = roof_peers.available()
+    for name, why in peers_ok.items():
+        if why:
+            print(f"  (peer {name} skipped: {why})")
     rows = []
-    for seed in (1, 2, 3, "all-1"):
+    cases = {1: {"seed": 1}, 2: {"seed": 2}, 3: {"seed": 3}, "all-1": {"roof_set": "all", "seed": 1},
+             "all-2": {"roof_set": "all", "seed": 2},
+             "all-1-5ppm-5cm": {"roof_set": "all", "seed": 1, "density_ppm2": 5.0, "noise_m": 0.05},
+             "all-1-30ppm-5cm": {"roof_set": "all", "seed": 1, "density_ppm2": 30.0, "noise_m": 0.05}}
+    for seed, extra in cases.items():
         scene = tmp / f"roofs{seed}.laz"
-        extra = {"roof_set": "all", "seed": 1} if seed == "all-1" else {"seed": seed}
         toolbox.run("synthetic-scene", output=scene, overwrite=True, kind="roofs", **extra)
         t, rep = timed(lambda: toolbox.run("roof-planes", scene, tmp / "rp.gpkg", overwrite=True))
         las = laspy.read(scene)
         roof = np.asarray(las.classification) == 6
-        truth = np.where(roof, np.asarray(las.plane_id), 0)
+        truth = np.where(roof, np.asarray(las.plane_id) + 1, 0)  # face ids start at 0
         pred = np.where(roof, np.asarray(laspy.read(tmp / "rp_classified.laz").plane_id), 0)
         sc = plane_scores(truth, pred)
         faces = {f["plane_id"]: f for f in json.loads((tmp / f"roofs{seed}_truth.json").read_text())["roof_planes"]}
         errs = []
         for r in gpd.read_file(tmp / "rp.gpkg", layer="roof_planes").itertuples():
             ids, cnt = np.unique(truth[pred == r.plane_id], return_counts=True)
-            f = faces[int(ids[np.argmax(cnt)])]
+            f = faces[int(ids[np.argmax(cnt)]) - 1]
             n = np.array([r.normal_x, r.normal_y, r.normal_z])
             errs.append((f["n_points"], np.degrees(np.arccos(min(1.0, abs(n @ np.array(f["normal"])))))))
         errs = np.array(errs)
@@ -614,25 +621,52 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
                "normal_err_deg_max_faces_ge_200": float(errs[errs[:, 0] >= 200, 1].max()),
                "normal_err_deg_max": float(errs[:, 1].max())}
         rows.append(row)
-        print(f"  synthetic {'roof_set=all seed 1, 12 buildings' if seed == 'all-1' else f'seed {seed}'}: {row['points']:,} roof points, {t:.2f} s; faces {sc['faces']}, planes "
+        print(f"  synthetic {seed}: {row['points']:,} roof points, {t:.2f} s; faces {sc['faces']}, planes "
               f"{sc['planes']}, completeness {sc['completeness']:.3f}, correctness {sc['correctness']:.3f}, right face "
               f"{sc['right_face_share']:.3f}; normal error max {row['normal_err_deg_max_faces_ge_200']:.2f} deg (faces "
               f">= 200 points), {row['normal_err_deg_max']:.2f} deg (all)", flush=True)
+        oid = np.asarray(las.object_id)
+        xyz = np.column_stack([las.x, las.y, las.z])
+        groups = [np.flatnonzero(roof & (oid == b)) for b in np.unique(oid[roof])]
+        rows += _roof_peer_rows(f"synthetic {seed}", xyz, truth, groups, rep["stats"], sc, peers_ok)
     files = sorted((SHARED / "roofn3d").glob("*/points/*.pts"))
     if files:
-        comp, corr, tt = [], [], 0.0
+        comp, corr, tt, ta, right, n_planes = [], [], 0.0, 0.0, 0, 0
+        peer_sc: dict = {}
         for f in files:
             lab = np.loadtxt(f.parent.parent / "points_label" / f"{f.stem}.seg", dtype=int)
-            t, _ = timed(lambda: toolbox.run("roof-planes", f, tmp / "rn.gpkg", overwrite=True, source="all",
-                                             crs="EPSG:32618"))
+            t, rep = timed(lambda: toolbox.run("roof-planes", f, tmp / "rn.gpkg", overwrite=True, source="all",
+                                               crs="EPSG:32618"))
             tt += t
-            sc = plane_scores(np.where(lab == 5, 0, lab), np.asarray(laspy.read(tmp / "rn_classified.laz").plane_id))
+            ta += rep["stats"]["seconds"]
+            truth = np.where(lab == 5, 0, lab)
+            pc = laspy.read(tmp / "rn_classified.laz")
+            sc = plane_scores(truth, np.asarray(pc.plane_id))
             comp.append(sc["completeness"])
             corr.append(sc["correctness"])
-        rows.append({"case": "roof-planes RoofN3D", "buildings": len(files), "ours_s": tt,
-                     "completeness": float(np.mean(comp)), "correctness": float(np.mean(corr))})
+            right += sc["right_planes"]
+            n_planes += sc["planes"]
+            xyz = np.column_stack([pc.x, pc.y, pc.z])
+            for r in _roof_peer_rows("", xyz, truth, [np.arange(len(xyz))], rep["stats"], sc, peers_ok, quiet=True):
+                acc = peer_sc.setdefault(r["peer"], {"s": 0.0, "C": [], "R": [], "right": 0, "planes": 0})
+                acc["s"] += r["peer_s"]
+                acc["C"].append(r["completeness"])
+                acc["R"].append(r["correctness"])
+                acc["right"] += r["right_planes"]
+                acc["planes"] += r["planes"]
+        rows.append({"case": "roof-planes RoofN3D", "buildings": len(files), "ours_s": tt, "ours_compute_s": ta,
+                     "completeness": float(np.mean(comp)), "correctness": float(np.mean(corr)),
+                     "right_planes": right, "planes": n_planes})
         print(f"  RoofN3D, {len(files)} real buildings: completeness {np.mean(comp):.3f}, correctness "
-              f"{np.mean(corr):.3f} (>= 50 % shared both ways), {tt:.2f} s in all", flush=True)
+              f"{np.mean(corr):.3f} (>= 50 % shared both ways), {right} of {n_planes} planes right, {tt:.2f} s in all "
+              f"({ta:.2f} s computing)", flush=True)
+        for name, acc in peer_sc.items():
+            rows.append({"case": f"roof-planes RoofN3D peer {name}", "peer_s": acc["s"], "ratio": acc["s"] / ta,
+                         "completeness": float(np.mean(acc["C"])), "correctness": float(np.mean(acc["R"])),
+                         "right_planes": acc["right"], "planes": acc["planes"]})
+            print(f"    peer {name:<22} {acc['s']:6.2f} s ({acc['s'] / ta:5.2f}x ours computing), completeness "
+                  f"{np.mean(acc['C']):.3f}, correctness {np.mean(acc['R']):.3f}, {acc['right']} of {acc['planes']} "
+                  f"planes right", flush=True)
     else:
         print("  (skipping RoofN3D: ../shared/data/roofn3d is absent)")
     for f in sorted((SHARED / "vaihingen_roofs").glob("*.txt")):
@@ -690,6 +724,44 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
     return rows
 
 
+ROOF_PEERS = {  # name -> (needs, call); settings as ours where the peer has them (see roof_peers)
+    "open3d segment_plane": ("open3d", lambda q, st: roof_peers.open3d_ransac(q, 0.15, 15)),
+    "open3d planar_patches": ("open3d", lambda q, st: roof_peers.open3d_patches(q, 15)),
+    # CGAL at its default normal threshold (0.9, 25.8 deg): at ours (10 deg) it scored lower
+    "CGAL efficient_RANSAC": ("cgal", lambda q, st: roof_peers.cgal_ransac(q, 0.15, st["link_m_used"], 15, 25.84)),
+    "CGAL region_growing": ("cgal", lambda q, st: roof_peers.cgal_region_growing(q, 0.15, 15, 25.84)),
+}
+
+
+def _roof_peer_rows(case, xyz, truth, groups, stats, ours, peers_ok, quiet=False) -> list[dict]:
+    """Each peer on the same buildings' points (one call per building); scores as ours."""
+    from toolbox_plugins.roofs.evaluation import plane_scores
+
+    rows = []
+    for name, (needs, call) in ROOF_PEERS.items():
+        if peers_ok.get(needs):
+            continue
+        pred = np.zeros(len(xyz), np.int64)
+        t, nxt = 0.0, 0
+        for g in groups:
+            xyz_g = xyz[g] - xyz[g].mean(axis=0)
+            t0 = time.perf_counter()
+            lab = call(xyz_g, stats)
+            t += time.perf_counter() - t0
+            pred[g] = np.where(lab > 0, lab + nxt, 0)
+            nxt += int(lab.max()) + 1
+        sc = plane_scores(truth, pred)
+        rows.append({"case": f"roof-planes {case} peer {name}", "peer": name, "peer_s": t,
+                     "ratio": t / stats["seconds"], **{k: sc[k] for k in ("planes", "right_planes", "completeness",
+                                                                           "correctness", "right_face_share")}})
+        if not quiet:
+            print(f"    peer {name:<22} {t:6.2f} s ({t / stats['seconds']:5.2f}x ours computing, {stats['seconds']:.2f} s), "
+                  f"planes {sc['planes']}, {sc['right_planes']} right (ours {ours['right_planes']}), completeness "
+                  f"{sc['completeness']:.3f}, correctness {sc['correctness']:.3f}, right face {sc['right_face_share']:.3f}",
+                  flush=True)
+    return rows
+
+
 def _bench_outlines(tmp: Path) -> list[dict]:
     """building-edges: outlines against the synthetic footprints and AHN3's BAG footprints (IoU)."""
     import csv
@@ -699,7 +771,7 @@ def _bench_outlines(tmp: Path) -> list[dict]:
     from shapely.geometry import Polygon, box
 
     rows = []
-    for seed in (1, 2, 3, "all-1"):
+    for seed in (1, 2, 3, "all-1", "all-2"):
         scene = tmp / f"roofs{seed}.laz"
         t, _ = timed(lambda: toolbox.run("building-edges", scene, tmp / "be.gpkg", overwrite=True))
         truth = gpd.read_file(tmp / f"roofs{seed}_truth.gpkg", layer="truth_buildings")

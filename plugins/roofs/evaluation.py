@@ -11,7 +11,7 @@ def plane_scores(truth: np.ndarray, pred: np.ndarray, min_points: int = 30, min_
     plane number per point, 0 or less for none. Faces with fewer than ``min_points`` points are
     not counted against completeness (a found plane matching one still counts as correct).
     Returns completeness, correctness, the share of the faces' points on their matched plane,
-    and the counts."""
+    and the counts (right_planes: planes matched to a face)."""
     truth = np.asarray(truth)
     pred = np.asarray(pred)
     faces, n_face = np.unique(truth[truth > 0], return_counts=True)
@@ -28,6 +28,7 @@ def plane_scores(truth: np.ndarray, pred: np.ndarray, min_points: int = 30, min_
             on_right += s
     counted = [f for f in faces.tolist() if size_f[f] >= min_points]
     found = sum(f in matched_f for f in counted)
-    return {"faces": len(counted), "planes": len(planes), "completeness": found / max(len(counted), 1),
+    return {"faces": len(counted), "planes": len(planes), "right_planes": len(matched_p),
+            "completeness": found / max(len(counted), 1),
             "correctness": len(matched_p) / max(len(planes), 1) if len(planes) else float(len(counted) == 0),
             "right_face_share": on_right / max(int((truth > 0).sum()), 1)}

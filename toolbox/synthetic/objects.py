@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer", "pyramid", "shed", "mansard", "gambrel")
+ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer", "pyramid", "shed", "mansard", "gambrel", "L", "T", "cross")
 
 
 # ------------------------------------------------------------------------------------------
@@ -138,13 +138,25 @@ class Building:
     def _n_main(self) -> int:
         return len(self.faces) - (2 if self.roof == "hip_dormer" else 0)
 
-    def face_plane_world(self, f: RoofFace, origin=(0.0, 0.0)):
-        """Unit normal (upwards) and offset d with n . p = d, in local scene coordinates + origin."""
+    def plane_uv(self, f: RoofFace):
+        """The face's plane as z = z0 + gu * u + gv * v in local scene coordinates."""
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
         # z = z0 + ga*a + gb*b, a = c*du + s*dv, b = -s*du + c*dv
         gu = f.ga * c - f.gb * s
         gv = f.ga * s + f.gb * c
-        z0 = f.z0 - gu * self.cu - gv * self.cv
+        return f.z0 - gu * self.cu - gv * self.cv, gu, gv
+
+    def roof_top(self) -> float:
+        tops = []
+        for f in self.faces:
+            a, bb = np.asarray(f.polygon_ab.exterior.coords).T if f.polygon_ab.geom_type == "Polygon" else \
+                np.concatenate([np.asarray(g.exterior.coords) for g in f.polygon_ab.geoms]).T
+            tops.append(float(np.max(f.z0 + f.ga * a + f.gb * bb)))
+        return max(tops)
+
+    def face_plane_world(self, f: RoofFace, origin=(0.0, 0.0)):
+        """Unit normal (upwards) and offset d with n . p = d, in local scene coordinates + origin."""
+        z0, gu, gv = self.plane_uv(f)
         # shift to world coordinates: u = x - ox
         z0w = z0 - gu * origin[0] - gv * origin[1]
         n = np.array([-gu, -gv, 1.0])
@@ -157,6 +169,145 @@ class Building:
 
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
         return affinity.affine_transform(f.polygon_ab, [c, -s, s, c, self.cu, self.cv])
+
+
+@dataclass
+class PlaneFace:
+    """A roof face of a compound building in scene coordinates: z = z0 + gu * u + gv * v."""
+
+    name: str
+    z0: float
+    gu: float
+    gv: float
+    polygon_uv: object
+
+
+class CompoundBuilding:
+    """An L-, T- or cross-shaped building: boxes (wings) with gable or hip roofs of their own; the
+    roof over a point is the highest wing roof there, so valleys form where wings meet (how
+    procedural LOD2 models join roof primitives). Coplanar faces of different wings that touch
+    are one face; a face cut in two by a wing is two faces."""
+
+    def __init__(self, id: int, roof: str, parts: list):
+        self.id, self.roof, self.parts = id, roof, parts
+        main = parts[0]
+        self.cu, self.cv, self.length_m, self.width_m, self.heading_rad = main.cu, main.cv, main.length_m, \
+            main.width_m, main.heading_rad
+        self.eave_m, self.pitch_deg, self.base_z = 0.0, 0.0, 0.0
+        self.faces: list[PlaneFace] = []
+
+    def contains(self, u, v, margin=0.0):
+        return np.logical_or.reduce([p.contains(u, v, margin) for p in self.parts])
+
+    def outline_uv(self):
+        from shapely import union_all
+        from shapely.geometry import Polygon
+
+        return union_all([Polygon(p.footprint_uv()) for p in self.parts])
+
+    def footprint_uv(self):
+        return np.asarray(self.outline_uv().exterior.coords)[:-1]
+
+    def build_faces(self) -> None:
+        from shapely import union_all
+        from shapely.geometry import Polygon
+
+        for p in self.parts:
+            p.eave_m, p.pitch_deg, p.base_z = self.eave_m, self.pitch_deg, self.base_z
+            p.build_faces()
+        boxes = [Polygon(p.footprint_uv()) for p in self.parts]
+        planes = [(i, k, *p.plane_uv(f), p.face_polygon_uv(f)) for i, p in enumerate(self.parts)
+                  for k, f in enumerate(p.faces)]
+        groups: dict = {}
+        self._group_of = {}
+        for i, k, z0, gu, gv, poly in planes:
+            for j, q in enumerate(self.parts):
+                if j == i:
+                    continue
+                higher = boxes[j]  # where wing j's roof (the lowest of its planes) rises above this plane
+                for _, _, z0g, gug, gvg, _ in (e for e in planes if e[0] == j):
+                    A, B, C = -(gug - gu), -(gvg - gv), z0g - z0
+                    if max(abs(A), abs(B), abs(C)) < 1e-9:  # the same plane: never above it
+                        higher = Polygon()
+                        break
+                    higher = _clip(higher, A, B, C)
+                if not higher.is_empty:
+                    poly = poly.difference(higher)
+            key = (round(z0, 6), round(gu, 9), round(gv, 9))
+            groups.setdefault(key, []).append(poly)
+            self._group_of[(i, k)] = key
+        self.faces, self._faces_of = [], {}
+        for key, polys in groups.items():
+            merged = union_all(polys)
+            comps = [g for g in getattr(merged, "geoms", [merged]) if g.geom_type == "Polygon" and g.area > 1e-3]
+            self._faces_of[key] = []
+            for g in comps:
+                self._faces_of[key].append(len(self.faces))
+                self.faces.append(PlaneFace(f"face{len(self.faces)}", key[0], key[1], key[2], g))
+
+    def roof_height(self, u, v):
+        import shapely
+
+        z = np.full(len(u), -np.inf)
+        part = np.full(len(u), -1)
+        kface = np.full(len(u), -1)
+        for i, p in enumerate(self.parts):
+            inside = np.flatnonzero(p.contains(u, v))
+            zi, ki = p.roof_height(u[inside], v[inside])
+            better = zi > z[inside] + 1e-9
+            sel = inside[better]
+            z[sel], part[sel], kface[sel] = zi[better], i, ki[better]
+        idx = np.full(len(u), -1)
+        for (i, k), key in self._group_of.items():
+            sel = np.flatnonzero((part == i) & (kface == k))
+            comps = self._faces_of[key]
+            if len(comps) == 1 or not len(sel):
+                idx[sel] = comps[0] if comps else -1
+                continue
+            # the component the point lies in (nearest, for points on a boundary)
+            d = np.stack([shapely.distance(self.faces[c].polygon_uv, shapely.points(u[sel], v[sel])) for c in comps])
+            idx[sel] = np.asarray(comps)[np.argmin(d, axis=0)]
+        return z, idx
+
+    def plane_uv(self, f: PlaneFace):
+        return f.z0, f.gu, f.gv
+
+    def face_plane_world(self, f: PlaneFace, origin=(0.0, 0.0)):
+        n = np.array([-f.gu, -f.gv, 1.0])
+        norm = np.linalg.norm(n)
+        return n / norm, float((f.z0 - f.gu * origin[0] - f.gv * origin[1]) / norm)
+
+    def face_polygon_uv(self, f: PlaneFace):
+        return f.polygon_uv
+
+    def roof_top(self) -> float:
+        return max(float(np.max(f.z0 + f.gu * np.asarray(f.polygon_uv.exterior.coords)[:, 0]
+                                + f.gv * np.asarray(f.polygon_uv.exterior.coords)[:, 1])) for f in self.faces)
+
+
+def compound_building(id: int, shape: str, style: str, cu: float, cv: float, length_m: float, width_m: float,
+                      heading_rad: float, rng) -> CompoundBuilding:
+    """A main wing (length x width, ``style`` gable or hip) and wings at right angles to it: ``L``
+    one at an end, ``T`` one off a side, ``cross`` one through it. A gable wing starts at the main
+    ridge line (its inner gable stays under the main roof); a hip wing at the far eave (its inner
+    hip face is then the main's far face)."""
+    main = Building(id, cu, cv, length_m, width_m, heading_rad, 0.0, style)
+    # narrower: its ridge stays below the main ridge, and a face it cuts into keeps a neck (or a
+    # gap) of at least 0.1 of the width, wider than the point spacing of any survey we model
+    w2 = float(width_m * rng.uniform(0.6, 0.8))
+    ext = float(rng.uniform(4.0, 8.0))
+    b1 = width_m / 2 + ext
+    b0 = 0.0 if style == "gable" else -width_m / 2
+    if shape == "L":
+        a_c = length_m / 2 - w2 / 2
+    elif shape == "T":
+        a_c = float(rng.uniform(-0.2, 0.2) * length_m)
+    else:  # cross: through the main wing, out on both sides
+        a_c = float(rng.uniform(-0.15, 0.15) * length_m)
+        b0 = -(width_m / 2 + float(rng.uniform(3.0, 6.0)))
+    wu, wv = main.to_uv(a_c, (b0 + b1) / 2)
+    wing = Building(id, float(wu), float(wv), b1 - b0, w2, heading_rad + np.pi / 2, 0.0, style)
+    return CompoundBuilding(id, shape, [main, wing])
 
 
 def _clip(poly, A, B, C):

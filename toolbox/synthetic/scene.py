@@ -19,12 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .objects import (
-    Building, Trees, catenary_sag, catenary_z, lattice_tower, sample_segments, vegetation_class, wood_pole,
+    Building, Trees, catenary_sag, catenary_z, compound_building, lattice_tower, sample_segments, vegetation_class,
+    wood_pole,
 )
 from .terrain import Terrain, _line_frame
 
 KINDS = ("corridor", "terrain", "roofs")
-ROOF_SETS = ("basic", "all")  # all: also pyramid, shed, mansard and gambrel roofs (kind=roofs)
+ROOF_SETS = ("basic", "all")  # all (kind=roofs): also pyramid, shed, mansard, gambrel, L, T and cross-shaped
+# buildings, and trees whose crowns reach over some eaves
 DEFAULT_EXTENT = {"corridor": (600.0, 250.0), "terrain": (400.0, 300.0), "roofs": (160.0, 120.0)}
 
 # ASPRS classes used here
@@ -89,7 +91,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         raise ValueError(f"kind must be one of {KINDS}")
     if roof_set not in ROOF_SETS:
         raise ValueError(f"roof_set must be one of {ROOF_SETS}")
-    W, H = DEFAULT_EXTENT[kind] if roof_set == "basic" or kind != "roofs" else (240.0, 170.0)
+    W, H = DEFAULT_EXTENT[kind] if roof_set == "basic" or kind != "roofs" else (300.0, 220.0)
     W = float(width_m or W)
     H = float(height_m or H)
     rng = np.random.default_rng(seed)
@@ -110,6 +112,9 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m)
     buildings = _place_buildings(kind, W, H, rng, terrain, lines, roof_set)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
+    n_eave_trees = 0
+    if kind == "roofs" and roof_set == "all":
+        trees, n_eave_trees = _add_eave_trees(trees, buildings, terrain, rng)
 
     pts = _Points()
     # ---- pulses: uniform over the area ------------------------------------------------
@@ -125,8 +130,22 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     for b in buildings:
         inside = b.contains(u, v) & ~taken
         zr, face = b.roof_height(u[inside], v[inside])
-        pts.add(u[inside], v[inside], zr + rng.normal(0, noise_m, inside.sum()), BUILDING, 1, 1,
-                pulse_id[inside], obj=b.id, plane=plane_base + face, intensity=rng.integers(900, 1400, inside.sum()))
+        if n_eave_trees:  # a crown over the eave: its top is the first return, the roof (if reached) the last
+            cz, ck = _crown_top(trees, len(trees) - n_eave_trees, u[inside], v[inside])
+            over = cz > zr + 0.1
+            through = ~over | (rng.uniform(0, 1, len(zr)) < 0.5)
+            nret = np.where(over & through, 2, 1)
+            i_in = np.flatnonzero(inside)
+            o = over
+            pts.add(u[i_in[o]], v[i_in[o]], cz[o] - np.abs(rng.normal(0, 0.2, o.sum())), trees.asprs[ck[o]], 1,
+                    nret[o], pulse_id[i_in[o]], obj=trees.first_id + ck[o], intensity=rng.integers(150, 600, o.sum()))
+            t_ = through
+            pts.add(u[i_in[t_]], v[i_in[t_]], zr[t_] + rng.normal(0, noise_m, t_.sum()), BUILDING, nret[t_], nret[t_],
+                    pulse_id[i_in[t_]], obj=b.id, plane=plane_base + face[t_],
+                    intensity=rng.integers(900, 1400, t_.sum()))
+        else:
+            pts.add(u[inside], v[inside], zr + rng.normal(0, noise_m, inside.sum()), BUILDING, 1, 1,
+                    pulse_id[inside], obj=b.id, plane=plane_base + face, intensity=rng.integers(900, 1400, inside.sum()))
         b._plane_base = plane_base
         plane_base += len(b.faces)
         taken |= inside
@@ -240,7 +259,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
             "id": b.id, "roof": b.roof, "footprint": (b.footprint_uv() + origin).tolist(),
             "length_m": b.length_m, "width_m": b.width_m, "heading_deg": float(np.degrees(b.heading_rad)),
             "eave_z": b.base_z + b.eave_m, "pitch_deg": b.pitch_deg,
-            "top_z": _roof_top(b),
+            "top_z": b.roof_top(),
         })
         for j, f in enumerate(b.faces):
             n, d = b.face_plane_world(f, origin)
@@ -278,15 +297,6 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     truth["n_pulses"] = int(n_pulses)
     return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
                  dtm_resolution_m, truth, terrain)
-
-
-def _roof_top(b: Building) -> float:
-    tops = []
-    for f in b.faces:
-        a, bb = np.asarray(f.polygon_ab.exterior.coords).T if f.polygon_ab.geom_type == "Polygon" else \
-            np.concatenate([np.asarray(g.exterior.coords) for g in f.polygon_ab.geoms]).T
-        tops.append(float(np.max(f.z0 + f.ga * a + f.gb * bb)))
-    return max(tops)
 
 
 def _gps_time(u, v, H):
@@ -409,7 +419,8 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
         specs = [("hip_dormer", 16.0, 11.0), ("hip", 14.0, 10.0), ("gable", 12.0, 9.0), ("flat", 22.0, 14.0),
                  ("gable", 30.0, 18.0), ("hip", 11.0, 9.0), ("flat", 5.0, 4.0), ("gable", 9.0, 7.0)]
         if roof_set == "all":
-            specs += [("pyramid", 10.0, 10.0), ("shed", 12.0, 8.0), ("mansard", 16.0, 12.0), ("gambrel", 14.0, 10.0)]
+            specs += [("pyramid", 10.0, 10.0), ("shed", 12.0, 8.0), ("mansard", 16.0, 12.0), ("gambrel", 14.0, 10.0),
+                      ("L", 18.0, 9.0), ("T", 20.0, 10.0), ("cross", 18.0, 9.0), ("L", 15.0, 8.0), ("T", 16.0, 9.0)]
     else:
         specs = [("hip_dormer", 16.0, 11.0), ("flat", 60.0, 40.0), ("gable", 34.0, 20.0), ("hip", 14.0, 10.0),
                  ("gable", 12.0, 9.0), ("hip", 12.0, 9.5), ("gable", 10.0, 8.0), ("flat", 18.0, 12.0),
@@ -424,7 +435,11 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
         for _try in range(400):
             heading = np.pi / 2 if roof == "hip_dormer" else rng.uniform(0, np.pi)  # test building: faces E/W
             cu, cv = rng.uniform(L / 2 + 8, W - L / 2 - 8), rng.uniform(L / 2 + 8, H - L / 2 - 8)
-            b = Building(len(placed) + 1, cu, cv, L, Wd, heading, 0.0, roof)
+            if roof in ("L", "T", "cross"):
+                style = "gable" if len(placed) % 2 else "hip"
+                b = compound_building(len(placed) + 1, roof, style, cu, cv, L, Wd, heading, rng)
+            else:
+                b = Building(len(placed) + 1, cu, cv, L, Wd, heading, 0.0, roof)
             fp = b.footprint_uv()
             ring = np.vstack([fp, fp.mean(0), (fp + fp.mean(0)) / 2])
             if terrain.excluded(ring[:, 0], ring[:, 1], 3.0).any():
@@ -450,7 +465,9 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
         if L <= 5:
             eave = rng.uniform(2.3, 3.0)
         b.eave_m = float(eave)
-        if roof in ("flat", "gable", "hip", "hip_dormer"):
+        if roof in ("L", "T", "cross"):
+            b.pitch_deg = float(rng.uniform(25, 40))
+        elif roof in ("flat", "gable", "hip", "hip_dormer"):
             b.pitch_deg = {"flat": 0.0, "gable": rng.uniform(25, 42) if L < 20 else rng.uniform(12, 20),
                            "hip": rng.uniform(28, 40), "hip_dormer": 35.0}[roof]
         elif roof in ("pyramid", "shed"):
@@ -468,6 +485,53 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
         b.build_faces()
         placed.append(b)
     return placed
+
+
+def _add_eave_trees(trees, buildings, terrain, rng):
+    """Trees beside about half the buildings, crowns reaching over the eave (0.1-0.5 of the crown's
+    radius inside the wall) and topping it by 1-4 m: the case that tests a roof filter's edges."""
+    from shapely.geometry import Point, Polygon
+
+    rows = []
+    outlines = [Polygon(b.footprint_uv()) for b in buildings]
+    for b, poly in zip(buildings, outlines):
+        if rng.uniform() < 0.5:
+            continue
+        ring = np.asarray(poly.exterior.coords)
+        k = int(rng.integers(0, len(ring) - 1))
+        p0, p1 = ring[k], ring[k + 1]
+        if np.hypot(*(p1 - p0)) < 4.0:
+            continue
+        mid = p0 + (p1 - p0) * rng.uniform(0.3, 0.7)
+        nrm = np.array([p1[1] - p0[1], p0[0] - p1[0]]) / np.hypot(*(p1 - p0))
+        if poly.contains(Point(*(mid + 0.1 * nrm))):
+            nrm = -nrm
+        radius = rng.uniform(2.5, 4.5)
+        c = mid + nrm * radius * rng.uniform(0.5, 0.9)
+        if any(o.distance(Point(*c)) < 0.5 for o in outlines) or terrain.excluded(c[:1], c[1:], 1.0).any():
+            continue
+        ground = float(terrain.height(c[:1], c[1:])[0])
+        height = b.base_z + b.eave_m - ground + rng.uniform(1.0, 4.0)
+        rows.append((c[0], c[1], ground, height, radius, rng.uniform() < 0.3))
+    if not rows:
+        return trees, 0
+    u, v, g, h, r, con = (np.array(c) for c in zip(*rows))
+    add = dict(u=u, v=v, ground=g, top=g + h, base=g + 0.3 * h, radius=r, conifer=con.astype(bool),
+               asprs=vegetation_class(h))
+    return Trees(**{k: np.r_[getattr(trees, k), add[k]] for k in add}, first_id=trees.first_id), len(rows)
+
+
+def _crown_top(trees, first, u, v):
+    """The highest crown top of trees[first:] over each point (-inf where none) and its tree."""
+    best = np.full(len(u), -np.inf)
+    which = np.zeros(len(u), int)
+    for k in range(first, len(trees)):
+        r = np.hypot(u - trees.u[k], v - trees.v[k])
+        zt, _ = trees.surfaces(k, r)
+        zt = np.where(r < trees.radius[k], zt, -np.inf)
+        better = zt > best
+        best, which = np.where(better, zt, best), np.where(better, k, which)
+    return best, which
 
 
 def _place_trees(kind, W, H, rng, terrain, buildings, lines):
