@@ -721,7 +721,33 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
                   f"length within 0.5 m of ours, {np.mean(near[key]):.3f} of ours within 0.5 m of the reference",
                   flush=True)
     rows += _bench_outlines(tmp)
+    rows.append(_bench_ball_vote())
     return rows
+
+
+def _bench_ball_vote() -> dict:
+    """The ball accumulator's voting: taichi kernel against its numpy reference, same points."""
+    from toolbox.kernels import taichi
+    from toolbox_plugins.roofs import core, reference
+    from toolbox_plugins.roofs.kernels import TaichiVoter
+
+    rng = np.random.default_rng(0)
+    xyz = rng.uniform(-10, 10, (20000, 3))
+    normals = reference.ball_cells(2.0)
+    radius = float(np.sqrt((xyz ** 2).sum(axis=1).max()))
+    cells, n_rho, k_min = core.accumulator_shape(len(normals), radius, 0.2)
+    scaled, off = reference.bin_scales(normals, 0.2, k_min)
+    voter = TaichiVoter(taichi())
+    a, b = np.zeros((cells, n_rho), np.int32), np.zeros((cells, n_rho), np.int32)
+    voter(a, xyz[:100], scaled, off, 1)  # compile
+    a[:] = 0
+    t_ti = min(timed(lambda: voter(a, xyz, scaled, off, 1))[0] for _ in range(3))
+    t_np, _ = timed(lambda: reference.vote(b, xyz, scaled, off, 1))
+    votes = len(xyz) * cells
+    print(f"  ball accumulator voting, {len(xyz):,} points x {cells:,} cells: taichi {t_ti * 1e3:.1f} ms "
+          f"({votes / t_ti / 1e9:.2f} G votes/s), numpy reference {t_np * 1e3:.0f} ms: {t_np / t_ti:.1f}x; "
+          f"equal: {bool(np.array_equal(a, b * 3))}", flush=True)
+    return {"case": "roof-planes ball vote", "ours_s": t_ti, "reference_s": t_np, "ratio": t_np / t_ti}
 
 
 ROOF_PEERS = {  # name -> (needs, call); settings as ours where the peer has them (see roof_peers)

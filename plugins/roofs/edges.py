@@ -111,8 +111,10 @@ def regular_outline(x, y, direction: float, cell: float, close_cells: int = 1, m
         return None
     geom = shapely.union_all(polys)
     geom = shapely.simplify(geom, 0.5 * cell)
-    # the outline runs along cell edges, outside the outermost points by half a cell on average
-    geom = geom.buffer(-0.5 * cell, join_style="mitre")
+    # the outline runs along cell edges, outside the outermost points by half a cell on average;
+    # a wall lies half a point spacing beyond them (as a Voronoi cell's edge)
+    spacing = np.sqrt(geom.area / len(x)) if len(x) else 0.0
+    geom = geom.buffer(-0.5 * max(cell - spacing, 0.0), join_style="mitre")
     if geom.is_empty:
         return None
     if stair_share(geom, 2.5 * cell) > 0.3:
