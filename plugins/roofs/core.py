@@ -158,6 +158,7 @@ def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_d
     # strip across their intersection (beside: a coplanar face elsewhere on the roof, cut off by
     # another wing, is no reason)
     kept.sort(key=lambda t: len(t[2]))
+    plan = {}  # one k-d tree per plane's points in plan, built when first needed
     j = 0
     while j < len(kept):
         n, d, idx = kept[j]
@@ -166,7 +167,9 @@ def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_d
         for n2, d2, idx2 in others:
             close = np.abs(p[idx] @ n2 - d2) <= max_distance
             if close.any():
-                close[close] = cKDTree(p[idx2, :2]).query(p[idx[close], :2], distance_upper_bound=link)[0] <= link
+                if id(idx2) not in plan:
+                    plan[id(idx2)] = cKDTree(p[idx2, :2])
+                close[close] = plan[id(idx2)].query(p[idx[close], :2], distance_upper_bound=link)[0] <= link
             near |= close
         if others and near.mean() > 0.5:
             del kept[j]

@@ -140,8 +140,7 @@ def _run(inputs, params, ctx):
     stats = {"source": source, "n_roof_points": int(len(idx)), "n_buildings": len(groups), "n_planes": next_id - 1,
              "points_on_planes": on_plane, "share_on_planes": round(on_plane / max(len(idx), 1), 4),
              "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
-             "link_m_used": round(link * hu, 3),
-             "accumulator_cells": len(reference.ball_cells(angle)),
+             "link_m_used": round(link * hu, 3), "accumulator_cells": len(reference.ball_cells(angle)),
              "seconds": round(time.perf_counter() - t0, 3)}
     stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "step")}
     return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},

@@ -156,13 +156,7 @@ class Building:
 
     def face_plane_world(self, f: RoofFace, origin=(0.0, 0.0)):
         """Unit normal (upwards) and offset d with n . p = d, in local scene coordinates + origin."""
-        z0, gu, gv = self.plane_uv(f)
-        # shift to world coordinates: u = x - ox
-        z0w = z0 - gu * origin[0] - gv * origin[1]
-        n = np.array([-gu, -gv, 1.0])
-        norm = np.linalg.norm(n)
-        n = n / norm
-        return n, float(z0w / norm)
+        return _plane_world(*self.plane_uv(f), origin)
 
     def face_polygon_uv(self, f: RoofFace):
         from shapely import affinity
@@ -269,20 +263,14 @@ class CompoundBuilding:
             idx[sel] = np.asarray(comps)[np.argmin(d, axis=0)]
         return z, idx
 
-    def plane_uv(self, f: PlaneFace):
-        return f.z0, f.gu, f.gv
-
     def face_plane_world(self, f: PlaneFace, origin=(0.0, 0.0)):
-        n = np.array([-f.gu, -f.gv, 1.0])
-        norm = np.linalg.norm(n)
-        return n / norm, float((f.z0 - f.gu * origin[0] - f.gv * origin[1]) / norm)
+        return _plane_world(f.z0, f.gu, f.gv, origin)
 
     def face_polygon_uv(self, f: PlaneFace):
         return f.polygon_uv
 
     def roof_top(self) -> float:
-        return max(float(np.max(f.z0 + f.gu * np.asarray(f.polygon_uv.exterior.coords)[:, 0]
-                                + f.gv * np.asarray(f.polygon_uv.exterior.coords)[:, 1])) for f in self.faces)
+        return max(p.roof_top() for p in self.parts)  # the roof is the highest wing roof everywhere
 
 
 def compound_building(id: int, shape: str, style: str, cu: float, cv: float, length_m: float, width_m: float,
@@ -308,6 +296,15 @@ def compound_building(id: int, shape: str, style: str, cu: float, cv: float, len
     wu, wv = main.to_uv(a_c, (b0 + b1) / 2)
     wing = Building(id, float(wu), float(wv), b1 - b0, w2, heading_rad + np.pi / 2, 0.0, style)
     return CompoundBuilding(id, shape, [main, wing])
+
+
+def _plane_world(z0, gu, gv, origin):
+    """The plane z = z0 + gu * u + gv * v (local scene coordinates) as a unit normal (upwards) and
+    offset d with n . p = d in world coordinates (u = x - origin x)."""
+    z0w = z0 - gu * origin[0] - gv * origin[1]
+    n = np.array([-gu, -gv, 1.0])
+    norm = np.linalg.norm(n)
+    return n / norm, float(z0w / norm)
 
 
 def _clip(poly, A, B, C):

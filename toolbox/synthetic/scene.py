@@ -130,22 +130,19 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     for b in buildings:
         inside = b.contains(u, v) & ~taken
         zr, face = b.roof_height(u[inside], v[inside])
+        i_in = np.flatnonzero(inside)
+        roof_hit, nret = np.ones(len(zr), bool), np.ones(len(zr), np.uint8)
         if n_eave_trees:  # a crown over the eave: its top is the first return, the roof (if reached) the last
             cz, ck = _crown_top(trees, len(trees) - n_eave_trees, u[inside], v[inside])
             over = cz > zr + 0.1
-            through = ~over | (rng.uniform(0, 1, len(zr)) < 0.5)
-            nret = np.where(over & through, 2, 1)
-            i_in = np.flatnonzero(inside)
-            o = over
-            pts.add(u[i_in[o]], v[i_in[o]], cz[o] - np.abs(rng.normal(0, 0.2, o.sum())), trees.asprs[ck[o]], 1,
-                    nret[o], pulse_id[i_in[o]], obj=trees.first_id + ck[o], intensity=rng.integers(150, 600, o.sum()))
-            t_ = through
-            pts.add(u[i_in[t_]], v[i_in[t_]], zr[t_] + rng.normal(0, noise_m, t_.sum()), BUILDING, nret[t_], nret[t_],
-                    pulse_id[i_in[t_]], obj=b.id, plane=plane_base + face[t_],
-                    intensity=rng.integers(900, 1400, t_.sum()))
-        else:
-            pts.add(u[inside], v[inside], zr + rng.normal(0, noise_m, inside.sum()), BUILDING, 1, 1,
-                    pulse_id[inside], obj=b.id, plane=plane_base + face, intensity=rng.integers(900, 1400, inside.sum()))
+            roof_hit = ~over | (rng.uniform(0, 1, len(zr)) < 0.5)
+            nret = np.where(over & roof_hit, 2, 1)
+            pts.add(u[i_in[over]], v[i_in[over]], cz[over] - np.abs(rng.normal(0, 0.2, over.sum())),
+                    trees.asprs[ck[over]], 1, nret[over], pulse_id[i_in[over]], obj=trees.first_id + ck[over],
+                    intensity=rng.integers(150, 600, over.sum()))
+        h = i_in[roof_hit]
+        pts.add(u[h], v[h], zr[roof_hit] + rng.normal(0, noise_m, len(h)), BUILDING, nret[roof_hit], nret[roof_hit],
+                pulse_id[h], obj=b.id, plane=plane_base + face[roof_hit], intensity=rng.integers(900, 1400, len(h)))
         b._plane_base = plane_base
         plane_base += len(b.faces)
         taken |= inside
