@@ -441,6 +441,67 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.85
 
 
+def _conductor_hits(cond, truth):
+    """(truth line, found line) pairs: parallel within 0.5 degrees and within 0.1 m across."""
+    hits = []
+    for k, t in enumerate(truth["conductor_lines_2d"]):
+        a, b = np.array(t["a"]), np.array(t["b"])
+        td = (b - a) / np.linalg.norm(b - a)
+        for i, g in enumerate(cond.geometry):
+            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+            d = np.array([bx - ax, by - ay]) / g.length
+            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                hits.append((k, i))
+    return hits
+
+
+def test_corridor_variants_have_their_geometry():
+    """Stacked circuits hang three phases one above another at each plan offset; a hillside
+    corridor's ground rises by its slope; a 400 m span is strung so its sag keeps half the
+    attachment height clear."""
+    from toolbox.synthetic.scene import make_scene
+
+    st = make_scene("corridor", 1, density_ppm2=1.0, line_variant="stacked")
+    a = [w for w in st.truth["wires"] if w["line"] == "A" and w["kind"] == "phase"]
+    per_offset = {}
+    for w in a:
+        per_offset.setdefault(round(w["offset_m"], 3), []).append(w)
+    assert len({round(w["offset_m"], 3) for w in a}) == 4  # two circuits x two sub-conductors across
+    assert all(len(v) == 3 for v in per_offset.values())
+    hill = make_scene("corridor", 1, density_ppm2=1.0, slope_pct=25.0)
+    flat = make_scene("corridor", 1, density_ppm2=1.0)
+    rise = (hill.dtm - flat.dtm)[:, -1].mean() - (hill.dtm - flat.dtm)[:, 0].mean()
+    assert rise == pytest.approx(0.25 * (hill.dtm.shape[1] - 1) * hill.dtm_resolution_m, rel=1e-3)
+    long_ = make_scene("corridor", 1, density_ppm2=1.0, span_m=400.0, width_m=1000.0)
+    spans = [s for s in long_.truth["spans"] if s["line"] == "A"]
+    assert max(s["length_m"] for s in spans) > 390
+    ox, oy = long_.origin
+    for s in spans:  # the lower arms' wires hang 17.5 m up: at least half that over the ground
+        c = np.array(s["curve"])
+        assert np.min(c[:, 2] - long_.terrain.height(c[:, 0] - ox, c[:, 1] - oy)) >= 0.5 * 17.5 - 0.2
+
+
+@pytest.mark.parametrize("variant, extra, min_recall", [
+    ("stacked", {}, 0.95),  # three phases 5 m above one another on each side
+    ("distribution", {"slope_pct": 25.0}, 0.85),  # a 25 % hillside, trees under and beside the wires
+])
+def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp_path):
+    path = tmp_path / "v.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant=variant, seed=1, **extra)
+    truth = json.loads(path.with_name("v_truth.json").read_text())
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = _conductor_hits(cond, truth)
+    assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"])))
+    assert len(cond) == len({i for _, i in hits})  # no false conductor
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    for c in truth["crossings"]:
+        assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
+    t14 = np.asarray(laspy.read(path).classification) == 14
+    p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= min_recall
+
+
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")

@@ -317,10 +317,12 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
-                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None):
+                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
+                  ground_z=None):
     """Wires and their catenary spans along each 2D line.
 
-    ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points. Returns
+    ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points; ``ground_z``: the
+    ground's height under each (optional: links heights about its slope along the line). Returns
     (spans, line_of, wire_of): per point the line and the wire it belongs to (-1: none).
 
     A line's band reaches ``reach`` (default: ``band``) past the ends of its 2D extent, and each
@@ -357,7 +359,10 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         # height, continuity and lateral position: link points close along the line, in height and
         # across it (within ALS scatter across a wire; sub-conductors of a bundle, closer than that,
         # are told apart afterwards by _split_bundles)
-        scaled = np.column_stack([s / s_link, z / z_link, off / off_link])
+        # heights linked about the ground's trend along the line: wires on a hillside climb with the
+        # towers, and a sparse wire's points a few metres apart on a 25 % slope differ by > z_link
+        slope_z = line_fit(s, ground_z[cand])[0] if ground_z is not None else 0.0
+        scaled = np.column_stack([s / s_link, (z - slope_z * s) / z_link, off / off_link])
         pairs = cKDTree(scaled).query_pairs(1.0, output_type="ndarray")
         g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
             if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))

@@ -88,7 +88,8 @@ def _run(inputs, params, ctx):
         geo.append((a, d / L, 0.0, L))
     spans, line_of, wire_of_pt = conductors_3d(
         geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
-        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"])
+        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
+        ground_z=(pc.z[keep] * vu - hag[keep]))
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
     # and hangs gently (pylon members and roof edges are straight in plan but not wires)
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and

@@ -38,7 +38,7 @@ def _run(inputs, params, ctx):
                        params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"],
                        line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"],
                        bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"],
-                       roof_set=params["roof_set"])
+                       roof_set=params["roof_set"], span_m=params["span_m"], slope_pct=params["slope_pct"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -89,8 +89,13 @@ def toolbox_algorithms():
                       "transmission line with bundled phases and an earth wire, crossed by a distribution line on "
                       "poles; ribbon: a compact line, its three phases side by side at one height, crossed above "
                       "by two conductors; distribution: three wires on 9 m poles with trees under and beside "
-                      "them, crossed by a two-wire low-voltage line on 7 m poles)",
-                      choices=("double-circuit", "ribbon", "distribution")),
+                      "them, crossed by a two-wire low-voltage line on 7 m poles; stacked: a double circuit whose "
+                      "three phases hang one above another, 5 m apart, on each side of taller towers)",
+                      choices=("double-circuit", "stacked", "ribbon", "distribution")),
+            Parameter("span_m", float, None, "double-circuit and stacked: the distance between towers (auto: 185 m)",
+                      unit="m", minimum=30.0, maximum=1000.0, allow_auto=True),
+            Parameter("slope_pct", float, 0.0, "the ground rises eastwards (along the lines) by this much "
+                      "(a corridor on a hillside)", unit="%", minimum=-60.0, maximum=60.0),
             Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
                       minimum=0.2, maximum=3.0),
             Parameter("bundle", int, 2, "double-circuit: sub-conductors per phase (1; 2 side by side; 3 a "

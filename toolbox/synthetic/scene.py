@@ -79,14 +79,14 @@ class _Points:
         return {k: np.concatenate([p[k] for p in self.parts]) for k in self.parts[0]}
 
 
-LINE_VARIANTS = ("double-circuit", "ribbon", "distribution")
+LINE_VARIANTS = ("double-circuit", "stacked", "ribbon", "distribution")
 
 
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
                width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
                origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
                phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6,
-               roof_set: str = "basic") -> Scene:
+               roof_set: str = "basic", span_m: float | None = None, slope_pct: float = 0.0) -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
     if roof_set not in ROOF_SETS:
@@ -95,7 +95,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     W = float(width_m or W)
     H = float(height_m or H)
     rng = np.random.default_rng(seed)
-    terrain = Terrain.random(W, H, rng, features=(kind != "roofs"))
+    terrain = Terrain.random(W, H, rng, features=(kind != "roofs"), tilt=slope_pct / 100.0)
     if kind == "roofs":
         terrain.hills = [(h[0], h[1], h[2] * 0.3, h[3] * 1.5) for h in terrain.hills]
     truth: dict = {"buildings": [], "roof_planes": [], "trees": [], "pylons": [], "wires": [], "spans": [],
@@ -109,7 +109,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     elif line_variant == "distribution":
         lines = _distribution_lines(W, H, rng, terrain)
     else:
-        lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m)
+        lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m, span_m=span_m,
+                             stacked=line_variant == "stacked")
     buildings = _place_buildings(kind, W, H, rng, terrain, lines, roof_set)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
     n_eave_trees = 0
@@ -315,20 +316,28 @@ def bundle_offsets(n: int, spacing_m: float):
             4: [(-h, 0.0), (h, 0.0), (-h, spacing_m), (h, spacing_m)]}[n]
 
 
-def _power_lines(kind, W, H, rng, terrain, bundle: int = 2, bundle_spacing_m: float = 0.6):
+def _power_lines(kind, W, H, rng, terrain, bundle: int = 2, bundle_spacing_m: float = 0.6,
+                 span_m: float | None = None, stacked: bool = False):
     """Line A: a straight double-circuit transmission line across the scene (lattice towers,
-    phases in bundles of ``bundle`` sub-conductors ``bundle_spacing_m`` apart, an earth wire).
-    Line B: a distribution line on wood poles crossing it at a sharp angle, lower."""
+    phases in bundles of ``bundle`` sub-conductors ``bundle_spacing_m`` apart, an earth wire;
+    ``stacked``: each circuit's three phases one above another, 5 m apart, on one side of the
+    tower), spans of ``span_m`` (default 185 m). Line B: a distribution line on wood poles
+    crossing it at a sharp angle, lower."""
     lines = []
     ang_a = np.radians(rng.uniform(3, 8))
     a0 = np.array([-40.0, 0.42 * H - 0.5 * W * np.tan(ang_a)])
     dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
-    span = 185.0
-    towers = [a0 + dir_a * (60.0 + k * span) for k in range(8)]
+    span = 185.0 if span_m is None else float(span_m)
+    towers = [a0 + dir_a * (60.0 + k * span) for k in range(int((W + 200.0) / span) + 2)]
     towers = [t for t in towers if -20 < t[0] < W + 20]
-    model = lattice_tower()
+    if stacked:
+        model = lattice_tower(height_m=38.0, arms=((21.0, 6.0), (26.0, 6.0), (31.0, 6.0)), earth_z=38.0)
+        arms = ("arm0_L", "arm0_R", "arm1_L", "arm1_R", "arm2_L", "arm2_R")
+    else:
+        model = lattice_tower()
+        arms = ("arm0_L", "arm0_R", "arm1_L", "arm1_R")
     wires = []
-    for arm in ("arm0_L", "arm0_R", "arm1_L", "arm1_R"):
+    for arm in arms:
         for dx, dz in bundle_offsets(bundle, bundle_spacing_m):
             wires.append({"attach": arm, "dx": dx, "dz": dz, "kind": "phase", "c": 1300.0})
     wires.append({"attach": "earth", "dx": 0.0, "kind": "earth", "c": 1600.0})
@@ -609,6 +618,16 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
             pa, pb = ends[si], ends[si + 1]
             L = float(np.hypot(*(pb - pa)))
             za, zb_ = zs[si], zs[si + 1]
+            # a long span is strung tighter: the wire keeps at least half the lower attachment's
+            # height over the ground beneath it (clearance), as a line designer would keep it
+            low = min(za - float(terrain.height(*towers[si])), zb_ - float(terrain.height(*towers[si + 1])))
+            c = w["c"]
+            probe = np.linspace(0, L, 41)
+            under = terrain.height(pa[0] + probe * (pb - pa)[0] / L, pa[1] + probe * (pb - pa)[1] / L)
+            for _ in range(40):
+                if low <= 0 or np.min(catenary_z(probe, L, za, zb_, c) - under) >= 0.5 * low:
+                    break
+                c *= 1.2
             n = int(L / spacing)
             s = np.sort(rng.uniform(0, L, n))
             # gaps: stretches without hits, as real scans have
@@ -621,7 +640,7 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
             lat = rng.normal(0, 0.04, len(s))  # footprint scatter across the wire
             uu = pa[0] + s * t_[0] + lat * -t_[1]
             vv = pa[1] + s * t_[1] + lat * t_[0]
-            zz = catenary_z(s, L, za, zb_, w["c"]) + rng.normal(0, 0.03, len(s))
+            zz = catenary_z(s, L, za, zb_, c) + rng.normal(0, 0.03, len(s))
             inside = (uu >= 0) & (uu <= terrain.width_m) & (vv >= 0) & (vv <= terrain.height_m)
             uu, vv, zz, s = uu[inside], vv[inside], zz[inside], s[inside]
             tp = _gps_time(uu, vv, 1e9) + 2e-4 + wid * 1e-6
@@ -629,10 +648,10 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
             pts.add(uu, vv, terrain.height(uu, vv) + rng.normal(0, noise_m, len(uu)), GROUND, 2, 2, tp,
                     intensity=rng.integers(200, 600, len(uu)))
             ss = np.linspace(0, L, 60)
-            curve = np.column_stack([pa[0] + ss * t_[0] + ox, pa[1] + ss * t_[1] + oy, catenary_z(ss, L, za, zb_, w["c"])])
+            curve = np.column_stack([pa[0] + ss * t_[0] + ox, pa[1] + ss * t_[1] + oy, catenary_z(ss, L, za, zb_, c)])
             truth["spans"].append({"wire_id": wid, "line": line["name"], "span": si, "length_m": L,
                                    "a": [float(pa[0] + ox), float(pa[1] + oy), za], "b": [float(pb[0] + ox), float(pb[1] + oy), zb_],
-                                   "catenary_c_m": w["c"], "sag_m": catenary_sag(L, za, zb_, w["c"]),
+                                   "catenary_c_m": c, "sag_m": catenary_sag(L, za, zb_, c),
                                    "n_points": int(len(uu)), "curve": curve.tolist()})
     # the 2D conductor lines: one per distinct plan offset (stacked wires share one)
     offsets = sorted({round(w["offset_m"], 3) for w in truth["wires"] if w["line"] == line["name"]})

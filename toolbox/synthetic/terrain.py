@@ -65,14 +65,15 @@ class Terrain:
     embankment: Embankment | None = None
     pond: tuple | None = None  # (cu, cv, ru, rv): an ellipse of still water
     pond_level_m: float | None = None
+    tilt: float = 0.0  # a plane's rise per metre eastwards (a corridor on a slope)
 
     @classmethod
-    def random(cls, width_m, height_m, rng, features=True) -> "Terrain":
+    def random(cls, width_m, height_m, rng, features=True, tilt: float = 0.0) -> "Terrain":
         W, H = width_m, height_m
         hills = []
         for _ in range(6):
             hills.append((rng.uniform(0, W), rng.uniform(0, H), rng.uniform(-6, 9), rng.uniform(35, 110)))
-        t = cls(W, H, hills=hills)
+        t = cls(W, H, hills=hills, tilt=tilt)
         if features:
             t.steep = (0.82 * H, 14.0, 8.0)  # up to ~41 degrees
             t.ridge = (0.62 * W, 0.12 * H, 0.97 * W, 0.55 * H, 7.0, 22.0)
@@ -91,7 +92,7 @@ class Terrain:
         u = np.asarray(u, float)
         v = np.asarray(v, float)
         z = np.full(np.broadcast(u, v).shape, self.base_m)
-        z = z + 2.5 * np.sin(u / 95.0) + 1.8 * np.cos(v / 70.0) + 0.8 * np.sin((u + 2 * v) / 41.0)
+        z = z + 2.5 * np.sin(u / 95.0) + 1.8 * np.cos(v / 70.0) + 0.8 * np.sin((u + 2 * v) / 41.0) + self.tilt * u
         for cu, cv, a, s in self.hills:
             z = z + a * np.exp(-((u - cu) ** 2 + (v - cv) ** 2) / (2 * s * s))
         if self.steep is not None:
