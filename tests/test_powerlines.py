@@ -384,6 +384,20 @@ def test_ribbons_are_wires_not_roofs():
     assert r[:600].all() and not r[630:].any()
 
 
+def _conductor_hits(cond, truth):
+    """(truth line, found line) pairs: parallel within 0.5 degrees and within 0.1 m across."""
+    hits = []
+    for k, t in enumerate(truth["conductor_lines_2d"]):
+        a, b = np.array(t["a"]), np.array(t["b"])
+        td = (b - a) / np.linalg.norm(b - a)
+        for i, g in enumerate(cond.geometry):
+            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+            d = np.array([bx - ax, by - ay]) / g.length
+            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                hits.append((k, i))
+    return hits
+
+
 def test_ribbon_corridor_at_default_parameters(tmp_path):
     """The compact line (three phases 0.6 m apart at one height, 11 m up) crossed above by two
     conductors: every conductor found once, none false, and its wire points."""
@@ -392,15 +406,7 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     truth = json.loads(path.with_name("ribbon_truth.json").read_text())
     rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
-    found = set()
-    for g in cond.geometry:
-        (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-        d = np.array([bx - ax, by - ay]) / g.length
-        for k, t in enumerate(truth["conductor_lines_2d"]):
-            a, b = np.array(t["a"]), np.array(t["b"])
-            td = (b - a) / np.linalg.norm(b - a)
-            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
-                found.add(k)
+    found = {k for k, _ in _conductor_hits(cond, truth)}
     assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
@@ -422,15 +428,7 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
     truth = json.loads(path.with_name("dist_truth.json").read_text())
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
-    hits = []
-    for k, t in enumerate(truth["conductor_lines_2d"]):
-        a, b = np.array(t["a"]), np.array(t["b"])
-        td = (b - a) / np.linalg.norm(b - a)
-        for i, g in enumerate(cond.geometry):
-            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-            d = np.array([bx - ax, by - ay]) / g.length
-            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
-                hits.append((k, i))
+    hits = _conductor_hits(cond, truth)
     assert sorted({k for k, _ in hits}) == list(range(5)) and len(cond) == len(hits) == 5
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6
@@ -439,20 +437,6 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.85
-
-
-def _conductor_hits(cond, truth):
-    """(truth line, found line) pairs: parallel within 0.5 degrees and within 0.1 m across."""
-    hits = []
-    for k, t in enumerate(truth["conductor_lines_2d"]):
-        a, b = np.array(t["a"]), np.array(t["b"])
-        td = (b - a) / np.linalg.norm(b - a)
-        for i, g in enumerate(cond.geometry):
-            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-            d = np.array([bx - ax, by - ay]) / g.length
-            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
-                hits.append((k, i))
-    return hits
 
 
 def test_corridor_variants_have_their_geometry():

@@ -330,14 +330,10 @@ def _power_lines(kind, W, H, rng, terrain, bundle: int = 2, bundle_spacing_m: fl
     span = 185.0 if span_m is None else float(span_m)
     towers = [a0 + dir_a * (60.0 + k * span) for k in range(int((W + 200.0) / span) + 2)]
     towers = [t for t in towers if -20 < t[0] < W + 20]
-    if stacked:
-        model = lattice_tower(height_m=38.0, arms=((21.0, 6.0), (26.0, 6.0), (31.0, 6.0)), earth_z=38.0)
-        arms = ("arm0_L", "arm0_R", "arm1_L", "arm1_R", "arm2_L", "arm2_R")
-    else:
-        model = lattice_tower()
-        arms = ("arm0_L", "arm0_R", "arm1_L", "arm1_R")
+    model = lattice_tower(height_m=38.0, arms=((21.0, 6.0), (26.0, 6.0), (31.0, 6.0)), earth_z=38.0) \
+        if stacked else lattice_tower()
     wires = []
-    for arm in arms:
+    for arm in [a for a in model.attachments if a.startswith("arm")]:
         for dx, dz in bundle_offsets(bundle, bundle_spacing_m):
             wires.append({"attach": arm, "dx": dx, "dz": dz, "kind": "phase", "c": 1300.0})
     wires.append({"attach": "earth", "dx": 0.0, "kind": "earth", "c": 1600.0})
