@@ -16,7 +16,7 @@ from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
 from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, occupied_cells,
-                                             parabola_fit, split_spans)
+                                             parabola_fit, peel_catenaries, split_spans)
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -261,6 +261,36 @@ def test_catenary_fit_and_span_split():
     assert len(fwd) >= 1 and rev == pytest.approx([-c for c in fwd[::-1]], abs=1e-6)
     z0, s0, c, rms = fit_catenary(s[s < 195], z[s < 195])
     assert c == pytest.approx(1000, rel=0.02) and s0 == pytest.approx(100, abs=1) and rms < 0.04
+
+
+def test_peel_separates_stacked_wires_and_leaves_crowns():
+    """Four wires of one span hung 0.35 m above one another (a mobile scan's distribution line,
+    closer than the 3D step's height link) and a crown's scatter in the same band: each wire comes
+    out as its own catenary with its points, and nothing is found in the crown."""
+    rng = np.random.default_rng(3)
+    truth = [(10.0 + 0.35 * k, 20.0, 120.0 + 5 * k) for k in range(4)]  # (z0, s0, c): one span, never crossing
+    s, z, off, label = [], [], [], []
+    for k, (z0, s0, c) in enumerate(truth):
+        sk = np.sort(rng.uniform(0, 40, 150))
+        s.append(sk)
+        z.append(catenary(sk, z0, s0, c) + rng.normal(0, 0.02, len(sk)))
+        off.append(0.3 * k - 0.45 + rng.normal(0, 0.03, len(sk)))
+        label.append(np.full(len(sk), k))
+    crown = rng.uniform([5, 7, -1], [25, 11, 1], (400, 3))  # under the wires, the band's width
+    s, z, off = np.r_[np.concatenate(s), crown[:, 0]], np.r_[np.concatenate(z), crown[:, 1]], np.r_[np.concatenate(off), crown[:, 2]]
+    label = np.r_[np.concatenate(label), np.full(len(crown), -1)]
+    found = peel_catenaries(s, z, off, min_points=20, min_span=8.0, max_rms=0.2, gap_m=5.0)
+    assert len(found) == 4
+    got = set()
+    for idx, (z0, s0, c, rms) in found:
+        k = np.bincount(label[idx][label[idx] >= 0]).argmax()
+        got.add(k)
+        assert np.mean(label[idx] == k) >= 0.97 and np.sum(label[idx] == k) >= 0.95 * 150  # its points, and few others
+        ss = np.linspace(0, 40, 50)
+        assert np.max(np.abs(catenary(ss, z0, s0, c) - catenary(ss, *truth[k]))) <= 0.05 and rms <= 0.05
+    assert got == {0, 1, 2, 3}
+    # the crown alone: points lined up in (s, z) by chance are not thin across the band
+    assert peel_catenaries(crown[:, 0], crown[:, 1], crown[:, 2], 20, 8.0, 0.2, 5.0) == []
 
 
 def test_catenary_fit_minimises_the_soft_l1_cost_as_scipy_does():
@@ -556,6 +586,19 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     assert np.hypot(py.geometry.x[0] - 0.5 * (tx.min() + tx.max()), py.geometry.y[0] - 0.5 * (ty.min() + ty.max())) <= 2.0
     t15 = out == 15
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
+
+
+def test_mobile_scan_stacked_wires_at_default_parameters(tmp_path):
+    """Oakland part3_an (a car-mounted scanner under a distribution line, wires 0.3-1 m above one
+    another), no setting: wire points against the CMU wire labels (class 14). A floor under what
+    the 3D step's catenary peel reaches (P 0.949 / R 0.545; before it R 0.306), not the issue's
+    0.90: the 2D Hough still misses the line's last 40 m past a bend (see the issue notes)."""
+    path = shared_file("oakland_mls/oakland_part3_an.laz")
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
+    truth = np.asarray(laspy.read(path).classification) == 14
+    pred = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
+    assert precision >= 0.9 and recall >= 0.5, (precision, recall)
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):

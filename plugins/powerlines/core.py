@@ -318,7 +318,7 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
                   min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
-                  ground_z=None):
+                  ground_z=None, peel: bool = True):
     """Wires and their catenary spans along each 2D line.
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points; ``ground_z``: the
@@ -369,24 +369,50 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         _, lab = connected_components(g, directed=False)
         lab = _split_bundles(s, off, lab, min_points)
         wire_of = _chain_pieces(s, z, lab, min_points, gap_max=6 * s_link, z_tol=z_link)
+        next_wire = int(wire_of.max()) + 1 if len(wire_of) else 0
         for k in np.flatnonzero(wire_of >= 0):
             m = lab == k
             if s[m].max() - s[m].min() < min_span:
                 continue
             wire = int(wire_of[k])
             sk, zk, ik, ok_ = s[m], z[m], cand[m], off[m]
+            n_spans = [0]
+
+            def emit(sel, wire, fit):
+                z0, s0, c, rms = fit
+                a, b = float(sk[sel].min()), float(sk[sel].max())
+                ss = np.linspace(a, b, 200)
+                chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
+                sag = float(np.max(chord - catenary(ss, z0, s0, c)))
+                o1, o0 = line_fit(sk[sel], ok_[sel]) if len(sk[sel]) >= 3 else (0.0, float(np.median(ok_[sel])))
+                spans.append(Span(li, wire, n_spans[0], s0, c, z0, a, b, rms, len(sk[sel]), sag, float(o0), float(o1)))
+                n_spans[0] += 1
+                if rms <= max_rms:  # points of a span that is not a wire are not wire points
+                    resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
+                    on = ik[sel][resid <= max(3 * rms, 0.15)]
+                    line_of[on], wire_of_point[on] = li, wire
+
             pieces = [(sk.min(), sk.max() + 1e-9)]
             cuts = split_spans(sk, zk, min_span)
             if cuts:
                 pieces = list(zip([sk.min()] + cuts, cuts + [sk.max() + 1e-9]))
-            j = -1
             while pieces:
                 lo_s, hi_s = pieces.pop(0)
                 sel = (sk >= lo_s) & (sk < hi_s)
                 if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_span:
                     continue
-                z0, s0, c, rms = fit_catenary(sk[sel], zk[sel])
-                if rms > max_rms:
+                fit = fit_catenary(sk[sel], zk[sel])
+                if fit[3] > max_rms and peel:
+                    # one catenary does not fit: wires stacked closer than z_link (a mobile scan's
+                    # distribution line) or clutter linked to a wire: its catenaries one at a time
+                    found = peel_catenaries(sk[sel], zk[sel], ok_[sel], min_points, min_span, max_rms, gap_m=s_link)
+                    if found:
+                        where = np.flatnonzero(sel)
+                        for i, (part, part_fit) in enumerate(found):
+                            emit(where[part], wire if i == 0 else next_wire, part_fit)
+                            next_wire += i > 0
+                        continue
+                if fit[3] > max_rms:
                     # one catenary does not fit: look again for an attachment point, more sensitively
                     finer = split_spans(sk[sel], zk[sel], min_span, min_drop=0.005)
                     if not finer:  # no slope evidence (points missing at the pole): the widest gap
@@ -400,20 +426,84 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                         edges = [lo_s] + finer + [hi_s]
                         pieces = list(zip(edges[:-1], edges[1:])) + pieces
                         continue
-                j += 1
-                a, b = float(sk[sel].min()), float(sk[sel].max())
-                ss = np.linspace(a, b, 200)
-                chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
-                sag = float(np.max(chord - catenary(ss, z0, s0, c)))
-                o1, o0 = line_fit(sk[sel], ok_[sel]) if sel.sum() >= 3 else (0.0, float(np.median(ok_[sel])))
-                spans.append(Span(li, wire, j, s0, c, z0, a, b, rms, int(sel.sum()), sag, float(o0), float(o1)))
-                if rms <= max_rms:  # points of a span that is not a wire are not wire points
-                    resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
-                    on = ik[sel][resid <= max(3 * rms, 0.15)]
-                    line_of[on], wire_of_point[on] = li, wire
+                emit(np.flatnonzero(sel), wire, fit)
         _pick_up(li, [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms], cand, s, z, off,
                  line_of, wire_of_point)
     return spans, line_of, wire_of_point
+
+
+def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float, gap_m: float, tol_m: float = 0.1,
+                    lateral_tol_m: float = 0.15, max_slope: float = 0.5, n_samples: int = 400, max_tries: int = 8,
+                    seed: int = 0):
+    """Catenaries in a piece of (along-line, height) points that no single one fits, strongest
+    first: a parabola through three points (a catenary's first-order form) with the most points
+    within ``tol_m``, its points' longest run without a gap over ``gap_m``, a catenary refitted
+    to them; kept when it fits within ``max_rms``, spans ``min_span`` and hangs gently (slope at
+    most ``max_slope``), then removed and the rest searched again (RANSAC, seeded: reproducible).
+    Returns [(indices into s, (z0, s0, c, rms))]."""
+    rng = np.random.default_rng(seed)
+    left = np.arange(len(s))
+    found = []
+    while len(left) >= min_points:
+        ls, lz, lo_ = s[left], z[left], off[left]
+        tri = np.sort(rng.integers(0, len(left), (n_samples, 3)), axis=1)
+        s1, s2, s3 = (ls[tri[:, i]] for i in range(3))
+        z1, z2, z3 = (lz[tri[:, i]] for i in range(3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d12, d23 = (z2 - z1) / (s2 - s1), (z3 - z2) / (s3 - s2)
+            a2 = (d23 - d12) / (s3 - s1)
+            a1 = d12 - a2 * (s1 + s2)
+            a0 = z1 - a1 * s1 - a2 * s1 * s1
+            lo, hi = float(ls.min()), float(ls.max())
+            # a wire hangs (curvature >= 0, a little slack for noise) and gently over the piece
+            ok = np.isfinite(a0) & (s3 - s1 >= min_span / 2) & (a2 >= -1e-3) & \
+                (np.abs(2 * a2 * lo + a1) <= max_slope) & (np.abs(2 * a2 * hi + a1) <= max_slope)
+        if not ok.any():
+            break
+        a2, a1, a0 = a2[ok], a1[ok], a0[ok]
+        votes = np.zeros(len(a2), np.int64)
+        for i in range(0, len(ls), 4096):  # (samples x points) in blocks: bounded memory
+            b = slice(i, i + 4096)
+            pred = (a2[:, None] * ls[None, b] + a1[:, None]) * ls[None, b] + a0[:, None]
+            votes += np.count_nonzero(np.abs(pred - lz[None, b]) <= tol_m, axis=1)
+        hit = None
+        for best in np.argsort(-votes, kind="stable")[:max_tries]:
+            if votes[best] < min_points:
+                break
+            inl = np.flatnonzero(np.abs((a2[best] * ls + a1[best]) * ls + a0[best] - lz) <= tol_m)
+            # the longest run of them along the line (another wire's crossing or clutter elsewhere)
+            order = inl[np.argsort(ls[inl])]
+            run = max(np.split(order, np.flatnonzero(np.diff(ls[order]) > gap_m) + 1), key=len)
+            if len(run) < min_points or np.ptp(ls[run]) < min_span:
+                continue
+            # a wire is thin across the line too (points of crowns lined up in (s, z) are not):
+            # its run without the points off its plan trend (robust: twice, about the median)
+            thin = np.ones(len(run), bool)
+            for _ in range(2):
+                o1, o0 = line_fit(ls[run][thin], lo_[run][thin])
+                r = lo_[run] - o1 * ls[run] - o0
+                thin = np.abs(r - np.median(r[thin])) <= max(3 * 1.4826 * np.median(np.abs(r[thin] - np.median(r[thin]))), 0.05)
+            if thin.sum() < max(min_points, len(run) // 2) or np.sqrt(np.mean(r[thin] ** 2)) > lateral_tol_m:
+                continue
+            run = run[thin]
+            if np.ptp(ls[run]) < min_span:
+                continue
+            fit = fit_catenary(ls[run], lz[run])
+            z0, s0, c, rms = fit
+            slope = np.abs(np.sinh((np.array([ls[run].min(), ls[run].max()]) - s0) / c))
+            if rms <= max_rms and np.all(slope <= max_slope):
+                o1, o0 = line_fit(ls[run], lo_[run])
+                hit = run, fit, (o1, o0, float(np.sqrt(np.mean((lo_[run] - o1 * ls[run] - o0) ** 2))))
+                break
+        if hit is None:
+            break
+        run, (z0, s0, c, rms), (o1, o0, o_rms) = hit
+        r = np.abs(catenary(ls, z0, s0, c) - lz)
+        on = (r <= max(3 * rms, 0.15)) & (ls >= ls[run].min()) & (ls <= ls[run].max()) & \
+            (np.abs(lo_ - o1 * ls - o0) <= max(3 * o_rms, 0.15))
+        found.append((left[on], hit[1]))
+        left = left[~on]
+    return found
 
 
 def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m: float = 0.5):
