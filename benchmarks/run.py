@@ -417,12 +417,13 @@ def bench_hough(tmp: Path) -> list[dict]:
     return [row]
 
 
-def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
+def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list[dict]:
     """Seconds per million input points of ``powerlines`` from the LAZ file to the GeoPackage: a
     warm process (after one untimed run, as a batch worker after its first tile) and the command
     line in a fresh process (imports and taichi start-up included). With ``large``, also a 3 km
     synthetic corridor of about 9 million points, where the start-up is spread over a survey-sized
-    file as in production."""
+    file as in production. The generator's corridor variants (all but the ribbon left out with
+    ``quick``) are scored against their truth: conductors, crossings, towers, wire points."""
     import subprocess
 
     cases = []
@@ -430,9 +431,19 @@ def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
     if not path.exists():
         toolbox.run("synthetic-scene", output=path, overwrite=True, kind="corridor", seed=1)
     cases.append(("synthetic corridor", path, {}))
-    rib = tmp / "ribbon.laz"  # a compact line: three phases 0.6 m apart at one height, crossed above
-    toolbox.run("synthetic-scene", output=rib, overwrite=True, kind="corridor", seed=1, line_variant="ribbon")
-    cases.append(("synthetic ribbon corridor", rib, {}))
+    # the generator's corridor variants, each at default parameters (seed 1, 12 pts/m2)
+    variants = [("ribbon", "ribbon", {"line_variant": "ribbon"}),  # three phases 0.6 m apart at one height
+                ("stacked", "stacked circuits", {"line_variant": "stacked"}),
+                ("distribution", "distribution", {"line_variant": "distribution"}),
+                ("slope25", "double circuit, 25 % slope", {"slope_pct": 25.0}),
+                ("span400", "double circuit, 400 m spans", {"span_m": 400.0, "width_m": 1000.0}),
+                ("span60", "double circuit, 60 m spans", {"span_m": 60.0})]
+    if quick:
+        variants = variants[:1]
+    for stem, label, kw in variants:
+        p = tmp / f"{stem}.laz"
+        toolbox.run("synthetic-scene", output=p, overwrite=True, kind="corridor", seed=1, **kw)
+        cases.append((f"synthetic {label}", p, {}))
     if large:
         big = tmp / "corridor_3km.laz"
         toolbox.run("synthetic-scene", output=big, overwrite=True, kind="corridor", seed=1, width_m=3000.0)
@@ -470,8 +481,8 @@ def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
                "stages_s": {k: v for k, v in rep["stats"].items() if k.endswith("_s")},
                "n_conductors": rep["stats"]["n_conductors"]}
         truth = p.with_name(p.stem + "_truth.json")
-        if truth.exists():  # synthetic scenes: the conductors found against the true 2D lines
-            row["n_conductors_truth"] = len(json.loads(truth.read_text())["conductor_lines_2d"])
+        if truth.exists():  # synthetic scenes: conductors, crossings and towers against the truth
+            row.update(_score_corridor(json.loads(truth.read_text()), tmp / "pl.gpkg"))
         t_cls = np.asarray(laspy.read(p).classification) == 14
         if t_cls.any():  # wire points against class 14 (the scene's truth, AHN4's producer, CMU's labels)
             pred = np.asarray(laspy.read(tmp / "pl_wires.laz").classification) == 14
@@ -480,7 +491,11 @@ def bench_powerlines(tmp: Path, large: bool = True) -> list[dict]:
             row["wire_recall"] = round(tp / int(t_cls.sum()), 3)
         row["cell_size_m_used"] = rep["stats"].get("cell_size_m_used")
         print_row(row)
-        found = f"{row['n_conductors']}" + (f"/{row['n_conductors_truth']} true" if "n_conductors_truth" in row else "")
+        found = f"{row['n_conductors']}"
+        if "n_conductors_truth" in row:
+            found = (f"{row['n_conductors_found']}/{row['n_conductors_truth']} found, {row['n_conductors_false']} false, "
+                     f"crossings {row['n_crossings_5cm']}/{row['n_crossings_truth']} within 5 cm, "
+                     f"towers {row['n_towers_2m']}/{row['n_towers_truth']} within 2 m, {row['n_towers_false']} false")
         pr = f"; wire points P {row['wire_precision']:.3f} R {row['wire_recall']:.3f}" if "wire_recall" in row else ""
         print(f"  {row['s_per_million']:.2f} s per million points warm, {row['cli_s_per_million']:.2f} from the command "
               f"line in a fresh process; conductors {found}{pr}; stages: {row['stages_s']}")
@@ -830,6 +845,37 @@ def _bench_outlines(tmp: Path) -> list[dict]:
     return rows
 
 
+def _score_corridor(truth: dict, gpkg: Path) -> dict:
+    """A synthetic corridor's layers against its truth: a found conductor matches a true one when
+    parallel within 0.5 degrees and within 0.1 m across; crossings and towers by distance."""
+    import geopandas as gpd
+
+    cond = gpd.read_file(gpkg, layer="conductors")
+    matched, used = set(), set()
+    for k, t in enumerate(truth["conductor_lines_2d"]):
+        a, b = np.array(t["a"]), np.array(t["b"])
+        td = (b - a) / np.linalg.norm(b - a)
+        for i, g in enumerate(cond.geometry):
+            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+            d = np.array([bx - ax, by - ay]) / g.length
+            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
+                matched.add(k)
+                used.add(i)
+    cr = gpd.read_file(gpkg, layer="crossings")
+    cr_err = [float(np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"]))) if len(cr) else np.inf
+              for c in truth["crossings"]]
+    py = gpd.read_file(gpkg, layer="pylons")
+    tow = [float(np.min(np.hypot(py.geometry.x - q["x"], py.geometry.y - q["y"]))) if len(py) else np.inf
+           for q in truth["pylons"]]
+    false_tow = sum(min((np.hypot(x - q["x"], y - q["y"]) for q in truth["pylons"]), default=np.inf) > 2.0
+                    for x, y in zip(py.geometry.x, py.geometry.y))
+    return {"n_conductors_truth": len(truth["conductor_lines_2d"]), "n_conductors_found": len(matched),
+            "n_conductors_false": len(cond) - len(used), "n_crossings_truth": len(cr_err),
+            "n_crossings_5cm": sum(e <= 0.05 for e in cr_err),
+            "crossing_err_max_m": round(max(cr_err), 3) if cr_err else None,
+            "n_towers_truth": len(tow), "n_towers_2m": sum(d <= 2.0 for d in tow), "n_towers_false": int(false_tow)}
+
+
 def fmt(v, w=8, d=2):
     return f"{v:{w}.{d}f}" if isinstance(v, (int, float)) and v is not None else f"{'-':>{w}}"
 
@@ -884,7 +930,7 @@ def main(argv=None) -> int:
         if "hough" in want:
             rows += bench_hough(tmp)
         if "powerlines" in want:
-            rows += bench_powerlines(tmp, large=not (args.no_10m or args.quick))
+            rows += bench_powerlines(tmp, large=not (args.no_10m or args.quick), quick=args.quick)
         if "roofs" in want:
             rows += bench_roofs(tmp, out_dir)
     check_end = machine_check()
