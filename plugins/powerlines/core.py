@@ -6,7 +6,9 @@
 * ``conductors_3d``: beyond the method's 2D limit — the 3D points near a 2D line are split by
   height and continuity (so wires stacked in plan come apart), each wire into spans at its
   attachment points (the highest points between sags), and a catenary
-  z = z0 + c·(cosh((s - s0)/c) - 1) is fitted per span in its vertical plane.
+  z = z0 + c·(cosh((s - s0)/c) - 1) is fitted per span in its vertical plane; where one does
+  not fit (wires stacked closer than the height link, clutter linked to a wire),
+  ``peel_catenaries`` takes them out one at a time.
 """
 
 from __future__ import annotations
@@ -438,8 +440,11 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
     """Catenaries in a piece of (along-line, height) points that no single one fits, strongest
     first: a parabola through three points (a catenary's first-order form) with the most points
     within ``tol_m``, its points' longest run without a gap over ``gap_m``, a catenary refitted
-    to them; kept when it fits within ``max_rms``, spans ``min_span`` and hangs gently (slope at
-    most ``max_slope``), then removed and the rest searched again (RANSAC, seeded: reproducible).
+    to them; kept when its points are thin across the line (``off``: lateral rms within
+    ``lateral_tol_m`` about a straight trend, a crown's points lined up in (s, z) are not), it
+    fits within ``max_rms``, spans ``min_span`` and hangs gently (slope at most ``max_slope``);
+    its points are removed and the rest searched again. The ``max_tries`` best-supported
+    parabolas are tried before giving up (RANSAC, seeded: reproducible).
     Returns [(indices into s, (z0, s0, c, rms))]."""
     rng = np.random.default_rng(seed)
     left = np.arange(len(s))

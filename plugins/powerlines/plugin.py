@@ -233,7 +233,7 @@ def toolbox_algorithms():
             "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
             "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
-            "per span; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
+            "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart); pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
             "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
             "conductors_3d, pylons."),
         reference=REFERENCE,
