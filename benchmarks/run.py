@@ -846,21 +846,15 @@ def _bench_outlines(tmp: Path) -> list[dict]:
 
 
 def _score_corridor(truth: dict, gpkg: Path) -> dict:
-    """A synthetic corridor's layers against its truth: a found conductor matches a true one when
-    parallel within 0.5 degrees and within 0.1 m across; crossings and towers by distance."""
+    """A synthetic corridor's layers against its truth: conductors by ``conductor_hits``,
+    crossings and towers by distance."""
     import geopandas as gpd
 
+    from toolbox_plugins.powerlines.evaluation import conductor_hits
+
     cond = gpd.read_file(gpkg, layer="conductors")
-    matched, used = set(), set()
-    for k, t in enumerate(truth["conductor_lines_2d"]):
-        a, b = np.array(t["a"]), np.array(t["b"])
-        td = (b - a) / np.linalg.norm(b - a)
-        for i, g in enumerate(cond.geometry):
-            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-            d = np.array([bx - ax, by - ay]) / g.length
-            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
-                matched.add(k)
-                used.add(i)
+    hits = conductor_hits(cond, truth)
+    matched, used = {k for k, _ in hits}, {i for _, i in hits}
     cr = gpd.read_file(gpkg, layer="crossings")
     cr_err = [float(np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"]))) if len(cr) else np.inf
               for c in truth["crossings"]]

@@ -17,6 +17,7 @@ from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
 from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, occupied_cells,
                                              parabola_fit, peel_catenaries, split_spans)
+from toolbox_plugins.powerlines.evaluation import conductor_hits
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -414,20 +415,6 @@ def test_ribbons_are_wires_not_roofs():
     assert r[:600].all() and not r[630:].any()
 
 
-def _conductor_hits(cond, truth):
-    """(truth line, found line) pairs: parallel within 0.5 degrees and within 0.1 m across."""
-    hits = []
-    for k, t in enumerate(truth["conductor_lines_2d"]):
-        a, b = np.array(t["a"]), np.array(t["b"])
-        td = (b - a) / np.linalg.norm(b - a)
-        for i, g in enumerate(cond.geometry):
-            (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-            d = np.array([bx - ax, by - ay]) / g.length
-            if abs(d @ td) > np.cos(np.radians(0.5)) and abs((ax - a[0]) * -td[1] + (ay - a[1]) * td[0]) < 0.1:
-                hits.append((k, i))
-    return hits
-
-
 def test_ribbon_corridor_at_default_parameters(tmp_path):
     """The compact line (three phases 0.6 m apart at one height, 11 m up) crossed above by two
     conductors: every conductor found once, none false, and its wire points."""
@@ -436,7 +423,7 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     truth = json.loads(path.with_name("ribbon_truth.json").read_text())
     rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
-    found = {k for k, _ in _conductor_hits(cond, truth)}
+    found = {k for k, _ in conductor_hits(cond, truth)}
     assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
@@ -458,7 +445,7 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
     truth = json.loads(path.with_name("dist_truth.json").read_text())
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
-    hits = _conductor_hits(cond, truth)
+    hits = conductor_hits(cond, truth)
     assert sorted({k for k, _ in hits}) == list(range(5)) and len(cond) == len(hits) == 5
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6
@@ -505,7 +492,7 @@ def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp
     truth = json.loads(path.with_name("v_truth.json").read_text())
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
-    hits = _conductor_hits(cond, truth)
+    hits = conductor_hits(cond, truth)
     assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"])))
     assert len(cond) == len({i for _, i in hits})  # no false conductor
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
