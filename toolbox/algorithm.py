@@ -173,6 +173,33 @@ class Input:
 
 
 @dataclass(frozen=True)
+class LayerMerge:
+    """How one vector layer's features from the tiles of a survey run (``--tile-size-m``) become
+    one layer. Whatever the rule, a feature is kept by the tile whose core holds it, never by the
+    tiles whose buffer it reaches: a point where it lies, a polygon by its representative point,
+    a line clipped to the core.
+
+    ``join``: line pieces that meet at a tile border (cut ends within ``join_tolerance_m`` of each
+    other, in the layer's units) become one feature. ``id_field`` is renumbered 0..n-1 over the
+    survey; ``refs`` maps a field of this layer to the layer whose ``id_field`` it holds (an
+    integer, or integers joined by commas), so references follow the renumbering. ``combine``
+    says how a joined feature's field comes from its pieces: ``min``, ``max``, ``sum`` or
+    ``length`` (the joined line's length); any other field is the longest piece's.
+    """
+
+    join: bool = True
+    join_tolerance_m: float = 0.15
+    id_field: str | None = None
+    refs: Mapping[str, str] = field(default_factory=dict)
+    combine: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self):
+        bad = {k: v for k, v in self.combine.items() if v not in ("min", "max", "sum", "length")}
+        if bad:
+            raise ValueError(f"LayerMerge.combine: {bad} (allowed: min, max, sum, length)")
+
+
+@dataclass(frozen=True)
 class Output:
     """One output of an algorithm. ``kind`` is one of OUTPUT_KINDS.
 
@@ -189,6 +216,9 @@ class Output:
     optional: bool = False
     #: file name suffix for a secondary output (default ``_<name>``)
     suffix: str | None = None
+    #: vector outputs in a survey run: ``{layer name: LayerMerge}``; a layer not named merges by
+    #: the default rule of its geometry (see :class:`LayerMerge`: lines clipped, joined, no ids)
+    merge: Mapping[str, LayerMerge] | None = None
 
     def __post_init__(self):
         if self.kind not in OUTPUT_KINDS:
@@ -227,6 +257,11 @@ class Algorithm:
     inputs: Sequence[Input] = ()
     outputs: Sequence[Output] = ()
     reference: str = ""
+    #: Survey runs (``--tile-size-m``): how far around each tile (metres) the algorithm must see
+    #: points for its result inside the tile to be the one it gives on the whole survey: a number,
+    #: or a function of the validated parameters. None: no declared need (the user gives
+    #: ``--buffer-m``; 0 otherwise).
+    tile_buffer_m: float | Callable[[Mapping[str, Any]], float] | None = None
     #: Filled in by the registry: the plugin (entry-point name), distribution and version.
     plugin: str = ""
     distribution: str = ""
@@ -244,6 +279,11 @@ class Algorithm:
             dup = {n for n in names if names.count(n) > 1}
             if dup:
                 raise ValueError(f"algorithm {self.id}: {what} {', '.join(sorted(dup))} declared twice")
+
+    def buffer_m(self, values: Mapping[str, Any]) -> float | None:
+        """The buffer this algorithm declares for the given (validated) parameters, in metres."""
+        need = self.tile_buffer_m
+        return float(need(values)) if callable(need) else (None if need is None else float(need))
 
     def parameter(self, name: str) -> Parameter:
         for p in self.parameters:

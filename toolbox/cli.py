@@ -57,7 +57,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--crs", help="set or override the CRS of point inputs, e.g. EPSG:28992")
     sp.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     sp.add_argument("--json", action="store_true", help="print the run report as JSON")
-    sp.add_argument("-j", "--jobs", type=int, default=None, help="parallel files in a batch (default: all cores)")
+    sp.add_argument("-j", "--jobs", "--workers", dest="jobs", type=int, default=None,
+                    help="worker processes: files of a batch, or tiles of a survey, at once (default: all cores)")
+    g = sp.add_argument_group("survey runs (all inputs are one survey, processed in tiles)")
+    g.add_argument("--tile-size-m", type=float, default=None, metavar="S",
+                   help="cut the survey into tiles of S metres on a fixed grid; -o is then an output folder")
+    g.add_argument("--buffer-m", type=float, default=None, metavar="B",
+                   help="points read around each tile (default: what the algorithm declares it needs)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the tiles on a dask.distributed cluster, e.g. tcp://10.0.0.5:8786 (default: local processes)")
     _common(sp)
 
     sp = sub.add_parser("pipeline", help="run a pipeline file (YAML or JSON)")
@@ -179,6 +187,10 @@ def cmd_run(args) -> int:
         if "preview" not in {o.name for o in alg.outputs}:
             raise UsageError(f"{alg.id} has no preview image; drop --preview")
         named["preview"] = args.preview
+    if args.tile_size_m is None and (args.buffer_m is not None or args.scheduler):
+        raise UsageError("--buffer-m and --scheduler belong to survey runs; add --tile-size-m")
+    if args.tile_size_m is not None:
+        return _run_survey(args, alg, params, named, reg)
     if is_batch(alg, args.inputs):
         if named:
             raise UsageError("--output-path/--preview name single files; a batch writes every output into the folder")
@@ -200,6 +212,30 @@ def cmd_run(args) -> int:
         print(f"{alg.id} done in {rep['timings_s']['total']:.2f} s, wrote:")
         _print_report(rep)
     return 0
+
+
+def _run_survey(args, alg, params, named, reg) -> int:
+    from .survey import run_survey
+
+    rep = run_survey(alg.id, args.inputs, args.output, params, tile_size_m=args.tile_size_m, buffer_m=args.buffer_m,
+                     workers=args.jobs, scheduler=args.scheduler, outputs=named, overwrite=args.overwrite,
+                     crs=args.crs, reg=reg)
+    if args.json:
+        print(json.dumps(rep, indent=2, default=str))
+    else:
+        s = rep["survey"]
+        where = f"Dask cluster {rep['execution']['scheduler']}" if rep["execution"]["scheduler"] else \
+            f"{rep['execution']['workers'] or 0} local workers"
+        print(f"{alg.id} survey: {s['n_files']} files, {s['n_points']:,} points, {rep['n_tiles']} tiles of "
+              f"{s['tile_size_m']:g} m with a {s['buffer_m']:g} m buffer; {rep['n_done']} done "
+              f"({rep['n_skipped']} by an earlier run), {rep['n_failed']} failed ({rep['timings_s']['total']:.1f} s, {where})")
+        for f in rep["failed"]:
+            print(f"  FAILED tile {f['tile']}: {f['error']}")
+        if rep["n_failed"]:
+            print(f"  nothing merged; fix the cause and run the same command again: finished tiles are kept ({rep['manifest']})")
+        for name, info in rep["outputs"].items():
+            print(f"  {name:<14} {info['path']}")
+    return 1 if rep["n_failed"] else 0
 
 
 def cmd_pipeline(args) -> int:

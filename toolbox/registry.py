@@ -34,6 +34,9 @@ class Registry:
     clashes: dict[str, list[str]] = field(default_factory=dict)
     style_dirs: list[Path] = field(default_factory=list)
     plugins: dict[str, tuple[str, str]] = field(default_factory=dict)  # name -> (dist, version)
+    #: the (name, value) of each entry point when they were given (tests), so that worker
+    #: processes of a survey run rediscover the same plugins; None: the installed ones
+    entry_points: list[tuple[str, str]] | None = None
 
     def get(self, algorithm_id: str) -> Algorithm:
         if algorithm_id in self.clashes:
@@ -68,6 +71,9 @@ def discover(entry_points=None) -> Registry:
     pm.add_hookspecs(hookspecs)
     if entry_points is None:
         entry_points = metadata.entry_points(group=ENTRY_POINT_GROUP)
+    else:
+        entry_points = list(entry_points)
+        reg.entry_points = [(ep.name, ep.value) for ep in entry_points]
     owners: dict[str, str] = {}
     plugin_dirs: list[Path] = []
     for ep in sorted(entry_points, key=lambda e: e.name):
@@ -107,6 +113,13 @@ def discover(entry_points=None) -> Registry:
             reg.algorithms[a.id] = a
     reg.style_dirs = plugin_dirs + [_host_style_dir()]
     return reg
+
+
+def rediscover(entry_points: list[tuple[str, str]] | None) -> "Registry":
+    """The registry a worker process uses: the installed plugins, or the given entry points."""
+    if entry_points is None:
+        return registry()
+    return discover([metadata.EntryPoint(name=n, value=v, group=ENTRY_POINT_GROUP) for n, v in entry_points])
 
 
 def _call_one(pm: pluggy.PluginManager, hook_name: str, plugin) -> object:

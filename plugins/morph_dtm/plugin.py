@@ -281,6 +281,13 @@ def _run_classify(inputs, params, ctx):
                           stats={"classes": {int(a): int(b) for a, b in zip(u, c)}})
 
 
+def ground_buffer_m(p) -> float:
+    """Survey runs: the points around a tile that its ground needs (the largest opening window
+    reaches max_filter_size_m; the footprint, the harmonic fill's rim and the 3x3 refinement
+    planes a few filter cells more); none when the ground is the file's own."""
+    return 0.0 if p.get("ground") == "file" else p["max_filter_size_m"] + 5 * p["filter_cell_m"]
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     resolution = Parameter("resolution_m", float, 1.0, "DTM cell size (0.5 m and 1 m are standard; bounded by "
@@ -303,6 +310,7 @@ def toolbox_algorithms():
                 "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
+            tile_buffer_m=ground_buffer_m,
             parameters=[resolution,
                         Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or "
                                   "the file's own class 2 (then only the DTM is made)", choices=("filter", "file")),
@@ -346,6 +354,8 @@ def toolbox_algorithms():
                 "medium (< 5 m) or high by their height above the terrain; points below the terrain are noise. "
                 "ASPRS classes 1, 2, 3, 4, 5, 6, 7."),
             reference=REFERENCE,
+            # the ground's need, and a building's whole roof (its planar set) seen from either side
+            tile_buffer_m=lambda p: max(ground_buffer_m(p), 50.0),
             parameters=[
                 resolution,
                 Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or the "

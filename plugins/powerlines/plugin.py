@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import toolbox
-from toolbox import Algorithm, DataError, Input, Output, Parameter
+from toolbox import Algorithm, DataError, Input, LayerMerge, Output, Parameter
 
 REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
@@ -224,6 +224,27 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     return {"conductors": new_cond, "conductor_segments": seg, "crossings": cr}
 
 
+def _tile_buffer_m(p) -> float:
+    """Survey runs: a Hough tile's width around each survey tile (a wire is seen as far as one
+    accumulator sees it), and the ground filter the chain calls at its defaults its largest
+    window (50 m) and a few cells."""
+    hough = p["tile_size_m"] if p["tile_size_m"] > 0 else 200.0
+    return max(hough, 60.0 if p["ground"] == "filter" else 0.0)
+
+
+# how the layers of the tiles of a survey become one: lines cut at tile borders joined, the
+# conductors renumbered and every reference to them following
+_REFS = {"conductor": "conductors"}
+LAYER_MERGE = {
+    "conductors": LayerMerge(id_field="conductor", combine={"length_m": "length", "height_min_m": "min",
+                                                            "height_max_m": "max", "n_wires": "max"}),
+    "conductor_segments": LayerMerge(refs=_REFS, combine={"length_m": "length"}),
+    "crossings": LayerMerge(refs={"conductors": "conductors"}),
+    "conductors_3d": LayerMerge(refs=_REFS, combine={"length_m": "length"}),
+    "pylons": LayerMerge(id_field="pylon"),
+}
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     return [Algorithm(
@@ -237,6 +258,7 @@ def toolbox_algorithms():
             "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
             "conductors_3d, pylons."),
         reference=REFERENCE,
+        tile_buffer_m=_tile_buffer_m,
         parameters=[
             Parameter("ground", str, "filter", "ground from the morphological filter or the file's class 2",
                       choices=("filter", "file")),
@@ -285,7 +307,8 @@ def toolbox_algorithms():
         inputs=[Input("points", "points", "raw LAS/LAZ point cloud",
                       dims=("classification", "return_number", "number_of_returns"))],
         outputs=[
-            Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d, pylons"),
+            Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d, pylons",
+                   merge=LAYER_MERGE),
             Output("classified", "points", "the input with the detected wire points as class 14 and tower points "
                    "as 15", optional=True,
                    suffix="_wires"),

@@ -1,0 +1,1063 @@
+"""Survey runs: one algorithm over many LAS/LAZ files taken as ONE survey, cut into tiles.
+
+``toolbox run ALG FILES... --tile-size-m S`` (or :func:`run_survey`):
+
+1. a catalog from the files' headers only (bounds, point counts, CRS; files in different CRSs are
+   refused), with a spatial index of the files;
+2. tiles of ``S`` on a fixed grid (multiples of ``S`` in the CRS, so that a survey run again, or
+   grown, cuts the same tiles), named by their south-west corner; tiles no file reaches are left
+   out;
+3. each tile is read with a buffer (``--buffer-m``, by default what the algorithm declares with
+   ``Algorithm.tile_buffer_m``) from every file that reaches it, in chunks: memory holds one tile
+   and its buffer, never a file or the survey;
+4. the algorithm runs on each tile in a worker (a local process pool, or the workers of a
+   dask.distributed cluster); the worker drops what lies in the buffer (rasters cropped to the
+   tile's cells, vector features kept by the tile whose core holds them, lines clipped to it,
+   points outside the core) and writes the tile's results;
+5. when every tile is done, the host merges: rasters into one Cloud Optimized GeoTIFF (streamed
+   through a VRT, never the whole mosaic in memory), vector layers into one GeoPackage (lines
+   cut at tile borders joined, ids renumbered, references followed: ``Output.merge``), point
+   outputs stay one LAZ per tile (``OUT/<output>/<tile>.laz``).
+
+The output folder holds ``survey.json``, the manifest: the run's settings and each tile's state.
+A rerun with the same settings skips finished tiles (a run killed half-way goes on where it
+stopped); a tile whose worker died is retried; a tile that fails (its data, or a bug) is
+reported with its reason while the others complete, and nothing is merged until all are done.
+The host knows no algorithm: everything above comes from the algorithm's declarations.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import logging
+import os
+import resource
+import socket
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from . import kernels, progress
+from .algorithm import Algorithm, LayerMerge
+from .errors import DataError, ToolboxError, UsageError
+
+log = logging.getLogger(__name__)
+
+MANIFEST = "survey.json"
+TILE_DIR = ".tiles"
+READ_CHUNK_POINTS = 1_000_000
+MAX_ATTEMPTS = 3  # a tile whose worker dies this often is reported failed
+SURVEY_EXTENSIONS = (".las", ".laz")
+
+
+# --------------------------------------------------------------------------------------------
+# Catalog
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SurveyFile:
+    """What the header of one file says (no point is read)."""
+
+    path: str
+    minx: float
+    miny: float
+    maxx: float
+    maxy: float
+    count: int
+    size: int
+    mtime_ns: int
+
+    def overlaps(self, box) -> bool:
+        x0, y0, x1, y1 = box
+        return self.minx <= x1 and self.maxx >= x0 and self.miny <= y1 and self.maxy >= y0
+
+
+@dataclass
+class Catalog:
+    files: list[SurveyFile]
+    crs: Any  # pyproj CRS or None
+    horizontal_unit_m: float = 1.0
+
+    def __post_init__(self):
+        from shapely import STRtree, box
+
+        self._tree = STRtree([box(f.minx, f.miny, f.maxx, f.maxy) for f in self.files])
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        return (min(f.minx for f in self.files), min(f.miny for f in self.files),
+                max(f.maxx for f in self.files), max(f.maxy for f in self.files))
+
+    @property
+    def n_points(self) -> int:
+        return sum(f.count for f in self.files)
+
+    def files_in(self, box_xy) -> list[SurveyFile]:
+        """The files whose header bounds reach the box (x0, y0, x1, y1)."""
+        from shapely import box
+
+        hits = self._tree.query(box(*box_xy), predicate="intersects")
+        return [self.files[i] for i in sorted(hits)]
+
+
+def expand_survey_inputs(items: Sequence[str]) -> list[str]:
+    """Files, folders (their .las/.laz files) and glob patterns, as one sorted list of files."""
+    out: list[str] = []
+    for item in items:
+        item = str(item)
+        p = Path(item)
+        if p.is_dir():
+            found = sorted(str(q) for q in p.iterdir() if q.is_file() and q.suffix.lower() in SURVEY_EXTENSIONS)
+            if not found:
+                raise UsageError(f"folder {item!r} holds no .las or .laz file")
+            out.extend(found)
+        elif any(ch in item for ch in "*?["):
+            found = sorted(f for f in glob.glob(item, recursive=True) if Path(f).suffix.lower() in SURVEY_EXTENSIONS)
+            if not found:
+                raise UsageError(f"pattern {item!r} matches no .las or .laz file")
+            out.extend(found)
+        else:
+            if not p.exists():
+                raise DataError(f"input {item!r} does not exist; check the path")
+            if p.suffix.lower() not in SURVEY_EXTENSIONS:
+                raise UsageError(f"input {item!r}: a survey run reads LAS/LAZ files (their headers give the "
+                                 "bounds); convert it to LAZ first")
+            out.append(item)
+    seen, unique = set(), []
+    for f in out:
+        key = os.path.realpath(f)
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    if not unique:
+        raise UsageError("a survey run needs at least one LAS/LAZ file")
+    return unique
+
+
+def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
+    """Read every file's header (bounds, count, CRS). Files in different CRSs are an error, unless
+    ``crs`` (text or pyproj CRS) says what they all are in."""
+    import laspy
+
+    from .io.points import _header_crs, crs_units, parse_crs
+
+    user_crs = parse_crs(crs) if isinstance(crs, str) else crs
+    files, crss = [], []
+    for path in paths:
+        try:
+            with laspy.open(path) as reader:
+                hdr = reader.header
+                mins, maxs, count = hdr.mins, hdr.maxs, int(hdr.point_count)
+                file_crs = None
+                if user_crs is None:
+                    try:
+                        file_crs = _header_crs(hdr)
+                    except Exception:  # malformed CRS records: as if it had none (said below)
+                        file_crs = None
+        except (laspy.errors.LaspyException, OSError, ValueError) as exc:
+            raise DataError(f"input {path!r} is not a readable LAS/LAZ file ({' '.join(str(exc).split())[:120]}); "
+                            "repair or remove it from the survey") from None
+        st = os.stat(path)
+        files.append(SurveyFile(str(Path(path).resolve()), float(mins[0]), float(mins[1]), float(maxs[0]),
+                                float(maxs[1]), count, st.st_size, st.st_mtime_ns))
+        crss.append(file_crs)
+    if user_crs is not None:
+        survey_crs = user_crs
+    else:
+        survey_crs = crss[0]
+        for path, c in zip(paths, crss):
+            if not _same_crs(c, survey_crs):
+                raise DataError(
+                    f"input {path!r} is in {_crs_name(c)} but {paths[0]!r} is in {_crs_name(survey_crs)}; "
+                    "a survey is in one CRS: reproject the files to one (e.g. pdal translate, las2las), or pass "
+                    "--crs if the headers are wrong")
+    hu = crs_units(survey_crs)[0] if survey_crs is not None else 1.0
+    empty = [f.path for f in files if f.count == 0]
+    if len(empty) == len(files):
+        raise DataError(f"the survey's {len(files)} file(s) hold no point; check the inputs")
+    return Catalog([f for f in files if f.count > 0], survey_crs, hu)
+
+
+def _same_crs(a, b) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return a == b
+
+
+def _crs_name(c) -> str:
+    if c is None:
+        return "no CRS"
+    code = c.to_epsg(min_confidence=90)
+    return f"EPSG:{code}" if code else repr(c.name)
+
+
+# --------------------------------------------------------------------------------------------
+# Tiles
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Tile:
+    """A tile's core, in the CRS's units: [x0, x1) x [y0, y1)."""
+
+    ix: int
+    iy: int
+    x0: float
+    y0: float
+    x1: float
+    y1: float
+
+    @property
+    def name(self) -> str:
+        return f"{_num(self.x0)}_{_num(self.y0)}"
+
+    def box(self, buffer: float = 0.0) -> tuple[float, float, float, float]:
+        return (self.x0 - buffer, self.y0 - buffer, self.x1 + buffer, self.y1 + buffer)
+
+
+def _num(v: float) -> str:
+    return f"{v:.0f}" if float(v).is_integer() else f"{v:g}"
+
+
+def plan_tiles(catalog: Catalog, tile_size: float) -> list[Tile]:
+    """Tiles of ``tile_size`` (CRS units) on the grid of its multiples that a file reaches."""
+    x0, y0, x1, y1 = catalog.bounds
+    i0, i1 = int(np.floor(x0 / tile_size)), int(np.floor(x1 / tile_size))
+    j0, j1 = int(np.floor(y0 / tile_size)), int(np.floor(y1 / tile_size))
+    n = (i1 - i0 + 1) * (j1 - j0 + 1)
+    if n > 1_000_000:
+        raise UsageError(f"--tile-size-m: {n:,} tiles over the survey; use larger tiles")
+    tiles = []
+    for j in range(j0, j1 + 1):
+        for i in range(i0, i1 + 1):
+            t = Tile(i, j, i * tile_size, j * tile_size, (i + 1) * tile_size, (j + 1) * tile_size)
+            # a tile only touched on its far edges holds no point of its half-open core
+            if any(f.minx < t.x1 and f.maxx >= t.x0 and f.miny < t.y1 and f.maxy >= t.y0 for f in catalog.files_in(t.box())):
+                tiles.append(t)
+    return tiles
+
+
+def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, dims=None,
+              chunk_points: int = READ_CHUNK_POINTS):
+    """The points of the tile and its buffer from ``files``, read in chunks (memory holds what
+    the box keeps plus one chunk). Returns (PointCloud, mask of the points in the tile's core).
+    ``dims``: the dimensions to keep besides x, y, z (None: all those every file has)."""
+    import laspy
+
+    from .io.points import PointCloud, _apply_crs, _decode_errors
+
+    bx0, by0, bx1, by1 = tile.box(buffer)
+    xs, ys, zs, parts = [], [], [], []
+    header, names = None, None
+    for f in files:
+        seen = 0
+        try:
+            with laspy.open(f.path) as reader:
+                hdr = reader.header
+                file_names = [n for n in hdr.point_format.dimension_names if n not in ("X", "Y", "Z")]
+                if header is None:
+                    header = hdr
+                names = file_names if names is None else [n for n in names if n in file_names]
+                keep_names = file_names if dims is None else [n for n in file_names if n in dims]
+                for chunk in reader.chunk_iterator(chunk_points):
+                    seen += len(chunk)
+                    x = np.asarray(chunk.x)
+                    y = np.asarray(chunk.y)
+                    m = (x >= bx0) & (x < bx1) & (y >= by0) & (y < by1)
+                    if not m.any():
+                        continue
+                    xs.append(x[m])
+                    ys.append(y[m])
+                    zs.append(np.asarray(chunk.z)[m])
+                    parts.append({n: np.asarray(chunk[n])[m] for n in keep_names})
+        except _decode_errors() as exc:
+            raise DataError(f"input {f.path!r} is truncated or corrupt after {seen} points "
+                            f"({' '.join(str(exc).split())[:120]}); repair or re-download it") from None
+        if seen != f.count:
+            raise DataError(f"input {f.path!r} is truncated: the header promises {f.count} points, the file holds "
+                            f"{seen}; re-download or re-export it")
+    keep = [n for n in (names or []) if dims is None or n in dims]
+    cat = (lambda arrs: np.concatenate(arrs)) if xs else (lambda arrs: np.empty(0))
+    fields = {n: np.concatenate([p[n] for p in parts]) for n in keep} if parts else {}
+    pc = PointCloud(x=cat(xs), y=cat(ys), z=cat(zs), fields=fields, source=f"tile {tile.name}", header=header)
+    _apply_crs(pc, crs, header)
+    core = (pc.x >= tile.x0) & (pc.x < tile.x1) & (pc.y >= tile.y0) & (pc.y < tile.y1)
+    return pc, core
+
+
+# --------------------------------------------------------------------------------------------
+# Cutting a tile's results to its core
+# --------------------------------------------------------------------------------------------
+
+def crop_raster(r, tile: Tile):
+    """The cells of ``r`` whose centres lie in the tile's core (a Raster; None if none)."""
+    from affine import Affine
+
+    from .io.rasters import Raster
+
+    t = r.transform
+    if t.b != 0 or t.d != 0 or t.e >= 0:
+        raise DataError("a survey run merges north-up rasters only; this algorithm's raster is rotated")
+    rows, cols = r.shape
+    c0 = max(int(np.ceil((tile.x0 - t.c) / t.a - 0.5)), 0)
+    c1 = min(int(np.ceil((tile.x1 - t.c) / t.a - 0.5)), cols)
+    r0 = max(int(np.floor((t.f - tile.y1) / -t.e + 0.5)), 0)
+    r1 = min(int(np.floor((t.f - tile.y0) / -t.e + 0.5)), rows)
+    if c1 <= c0 or r1 <= r0:
+        return None
+    data = r.data[..., r0:r1, c0:c1]
+    shifted = Affine(t.a, 0.0, t.c + c0 * t.a, 0.0, t.e, t.f + r0 * t.e)
+    return Raster(np.ascontiguousarray(data), shifted, crs=r.crs, nodata=r.nodata,
+                  style=r.style, source=r.source, description=r.description)
+
+
+def clip_polyline(coords: np.ndarray, box) -> list[tuple[np.ndarray, bool, bool]]:
+    """Pieces of a polyline (n x 2 or n x 3; z interpolated) inside a closed box, each with
+    whether its start and its end were cut by the box (the line goes on outside)."""
+    x0, y0, x1, y1 = box
+    pieces, cur, cut_start = [], None, False
+    for i in range(len(coords) - 1):
+        p, q = coords[i], coords[i + 1]
+        d = q - p
+        t0, t1 = 0.0, 1.0
+        ok = True
+        for num, den in ((p[0] - x0, -d[0]), (x1 - p[0], d[0]), (p[1] - y0, -d[1]), (y1 - p[1], d[1])):
+            if den == 0:
+                if num < 0:
+                    ok = False
+                    break
+                continue
+            t = num / den
+            if den < 0:
+                t0 = max(t0, t)
+            else:
+                t1 = min(t1, t)
+        if not ok or t0 > t1:
+            if cur is not None:
+                pieces.append((np.array(cur), cut_start, True))
+                cur = None
+            continue
+        a, b = p + t0 * d, p + t1 * d
+        if cur is None or t0 > 0:
+            if cur is not None:
+                pieces.append((np.array(cur), cut_start, True))
+            cur, cut_start = [a, b], t0 > 0
+        else:
+            cur.append(b)
+        if t1 < 1:
+            pieces.append((np.array(cur), cut_start, True))
+            cur = None
+    if cur is not None:
+        pieces.append((np.array(cur), cut_start, False))
+    return [(c, s, e) for c, s, e in pieces if len(c) >= 2 and np.hypot(*(c[-1, :2] - c[0, :2])) > 0]
+
+
+def cut_layer(gdf, tile: Tile):
+    """The features of a layer this tile owns: points in its core, polygons whose representative
+    point is in it, lines clipped to it (columns ``_piece``: the feature's row, ``_cut0`` /
+    ``_cut1``: whether the piece's start / end was cut at the core's border)."""
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    x0, y0, x1, y1 = tile.box()
+
+    def inside(x, y):
+        return (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+
+    rows, geoms, pieces, cuts0, cuts1 = [], [], [], [], []
+    for i, g in enumerate(gdf.geometry):
+        if g is None or g.is_empty:
+            continue
+        kind = g.geom_type
+        if kind in ("LineString", "MultiLineString"):
+            parts = [g] if kind == "LineString" else list(g.geoms)
+            for part in parts:
+                for coords, c0, c1 in clip_polyline(np.asarray(part.coords), (x0, y0, x1, y1)):
+                    rows.append(i)
+                    geoms.append(LineString(coords))
+                    pieces.append(i)
+                    cuts0.append(c0)
+                    cuts1.append(c1)
+            continue
+        p = g if kind == "Point" else g.representative_point()
+        if inside(p.x, p.y):
+            rows.append(i)
+            geoms.append(g)
+            pieces.append(i)
+            cuts0.append(False)
+            cuts1.append(False)
+    out = gdf.drop(columns=gdf.geometry.name).iloc[rows].reset_index(drop=True)
+    out = gpd.GeoDataFrame(out, geometry=gpd.GeoSeries(geoms, crs=gdf.crs), crs=gdf.crs)
+    out["_piece"] = np.asarray(pieces, np.int64)
+    out["_cut0"] = np.asarray(cuts0, bool)
+    out["_cut1"] = np.asarray(cuts1, bool)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# One tile, in a worker
+# --------------------------------------------------------------------------------------------
+
+def _peak_rss_mb() -> float:
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)  # KiB on Linux
+
+
+def run_tile(task: Mapping[str, Any]) -> dict:
+    """Run the algorithm on one tile and write the tile's results; never raises (a failure is
+    returned with its reason). ``task`` is a plain dict, so that a local process and a Dask
+    worker on another machine run the same thing."""
+    t0 = time.perf_counter()
+    name = task["tile"]["name"] if "name" in task["tile"] else Tile(**task["tile"]).name
+    base = {"tile": name, "pid": os.getpid(), "host": socket.gethostname()}
+    try:
+        progress.set_quiet(True)
+        kernels.set_arch(task.get("arch"))
+        from .memory import tune_allocator
+        from .registry import rediscover
+        from .runner import Context, _as_result
+
+        tune_allocator()
+        reg = rediscover(task.get("entry_points"))
+        alg = reg.get(task["algorithm"])
+        tile = Tile(**task["tile"])
+        files = [SurveyFile(**f) for f in task["files"]]
+        from .io.points import parse_crs
+
+        crs = parse_crs(task["crs"]) if task.get("crs") else None
+        pc, core = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"))
+        stats = {"n_points": int(len(pc)), "n_core_points": int(core.sum()), "read_s": round(time.perf_counter() - t0, 3)}
+        if not core.any():
+            return {**base, "status": "empty", "stats": stats, "outputs": {}, "layer_types": {},
+                    "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}
+        ctx = Context(reg, alg.id, quiet=True, requested=frozenset(task["requested"]))
+        t1 = time.perf_counter()
+        result = _as_result(alg.run({task["input"]: pc}, dict(task["params"]), ctx), alg)
+        stats["compute_s"] = round(time.perf_counter() - t1, 3)
+        stats.update({k: v for k, v in {**ctx.stats, **result.stats}.items() if isinstance(v, (int, float, str, bool))})
+        written, layer_types = _write_tile_outputs(alg, result.outputs, task, tile, core)
+        return {**base, "status": "done", "stats": stats, "outputs": written, "layer_types": layer_types,
+                "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}
+    except ToolboxError as exc:
+        error = str(exc)
+    except MemoryError:
+        error = "ran out of memory; use a smaller --tile-size-m or fewer --workers"
+    except Exception as exc:  # a plugin's bug on one tile must not stop the others
+        error = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
+    return {**base, "status": "failed", "error": error, "stats": {}, "outputs": {}, "layer_types": {},
+            "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _write_tile_outputs(alg: Algorithm, outputs: Mapping[str, Any], task, tile: Tile, core) -> tuple[dict, dict]:
+    from .io.points import write_points
+    from .io.rasters import write_raster
+    from .io.vectors import write_vectors
+
+    kinds = {o.name: o.kind for o in alg.outputs}
+    tile_dir = Path(task["tile_dir"]) / tile.name
+    tile_dir.mkdir(parents=True, exist_ok=True)
+    written, layer_types = {}, {}
+    for name, value in outputs.items():
+        if value is None or name not in task["outputs"]:
+            continue
+        kind = kinds[name]
+        if kind == "raster":
+            part = crop_raster(value, tile)
+            if part is None:
+                continue
+            path = tile_dir / f"{name}.tif"
+            write_raster(part, path, overwrite=True)
+        elif kind == "vector":
+            layers = {}
+            for layer, gdf in value.items():
+                layers[layer] = cut_layer(gdf, tile)
+                gtype = gdf.attrs.get("geometry_type") or (gdf.geom_type.iloc[0] if len(gdf) else "Unknown")
+                layer_types[f"{name}:{layer}"] = gtype
+                if len(layers[layer]) == 0:
+                    layers[layer].attrs["geometry_type"] = gtype
+            path = tile_dir / f"{name}.gpkg"
+            write_vectors(layers, path, overwrite=True)
+        elif kind == "points":
+            folder = Path(task["outputs"][name])
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / f"{tile.name}{Path(task['point_ext']).suffix if task.get('point_ext') else '.laz'}"
+            write_points(value.subset(core) if len(value) == len(core) else value, path, overwrite=True)
+        elif kind == "json":
+            path = tile_dir / f"{name}.json"
+            from .runner import _json_default
+
+            tmp = path.with_suffix(".json.partial")
+            tmp.write_text(json.dumps(value, default=_json_default), encoding="utf-8")
+            os.replace(tmp, path)
+        else:  # images are pictures of one run; a survey has no single picture to give
+            continue
+        written[name] = str(path)
+    return written, layer_types
+
+
+# --------------------------------------------------------------------------------------------
+# Executors
+# --------------------------------------------------------------------------------------------
+
+def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None], on_start=None) -> None:
+    """Tiles in a process pool, at most ``workers`` at a time. A worker that dies (killed, out of
+    memory) breaks the pool: its tiles are retried on a fresh pool, up to MAX_ATTEMPTS times."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+    from concurrent.futures.process import BrokenProcessPool
+
+    queue = list(tasks)
+    attempts: dict[str, int] = {}
+    # workers start from a clean server process, not forked from the driver: a driver that has
+    # run GDAL (or any library with a thread pool) may hold a lock a forked child then waits on
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["toolbox.survey", "toolbox.runner"])
+    else:
+        ctx = mp.get_context("spawn")
+    while queue:
+        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        running: dict = {}
+        broken = False
+        try:
+            while queue or running:
+                while queue and not broken and len(running) < workers:
+                    task = queue.pop(0)
+                    name = Tile(**task["tile"]).name
+                    attempts[name] = attempts.get(name, 0) + 1
+                    running[pool.submit(run_tile, task)] = (task, name)
+                    if on_start:
+                        on_start(name)
+                if not running:
+                    break
+                done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                for fut in done:
+                    task, name = running.pop(fut)
+                    try:
+                        on_result(fut.result())
+                    except BrokenProcessPool:
+                        broken = True
+                        if attempts[name] < MAX_ATTEMPTS:
+                            queue.insert(0, task)
+                            log.warning("tile %s: its worker died; retrying it (attempt %d of %d)", name,
+                                        attempts[name] + 1, MAX_ATTEMPTS)
+                        else:
+                            on_result({"tile": name, "status": "failed", "stats": {}, "outputs": {}, "layer_types": {},
+                                       "error": f"its worker died {attempts[name]} times (killed, or out of memory: "
+                                                "try a smaller --tile-size-m or fewer --workers)"})
+                if broken and not running:
+                    break
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_dask(tasks: list[dict], scheduler, on_result: Callable[[dict], None], on_start=None) -> dict:
+    """Tiles on a dask.distributed cluster (an address, or a Client). Dask reschedules the tile
+    of a worker that dies (up to its ``allowed-failures``)."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise UsageError("--scheduler needs dask.distributed: pip install 'lidar-toolbox[cluster]'") from None
+    own = not hasattr(scheduler, "submit")
+    if own:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise DataError(f"could not reach the Dask scheduler at {scheduler!r} ({' '.join(str(exc).split())[:120]}); "
+                            "start one with 'dask scheduler' and workers with 'dask worker ADDRESS --nthreads 1'") from None
+    else:
+        client = scheduler
+    try:
+        info = client.scheduler_info()
+        n_workers = len(info.get("workers", {}))
+        futures = {}
+        for task in tasks:
+            name = Tile(**task["tile"]).name
+            fut = client.submit(run_tile, task, key=f"tile-{name}-{os.getpid()}-{time.time_ns()}", pure=False)
+            futures[fut] = name
+            if on_start:
+                on_start(name)
+        for fut in as_completed(list(futures)):
+            name = futures[fut]
+            try:
+                on_result(fut.result())
+            except Exception as exc:  # KilledWorker: its workers kept dying on this tile
+                on_result({"tile": name, "status": "failed", "stats": {}, "outputs": {}, "layer_types": {},
+                           "error": f"the cluster gave up on it: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}"})
+        return {"address": client.scheduler.address, "n_workers": n_workers}
+    finally:
+        if own:
+            client.close()
+
+
+# --------------------------------------------------------------------------------------------
+# Merging
+# --------------------------------------------------------------------------------------------
+
+def merge_rasters(paths: Sequence[Path], out: Path, style_name: str | None, style_dirs, overwrite: bool) -> dict:
+    """Per-tile rasters (same cell size and CRS, no overlap) into one COG, streamed through a VRT."""
+    import rasterio
+    from rasterio.shutil import copy as rio_copy
+
+    from .io.atomic import atomic_path
+    from .io.rasters import Raster
+
+    metas = []
+    for p in paths:
+        with rasterio.open(p) as ds:
+            metas.append((str(Path(p).resolve()), ds.transform, ds.width, ds.height, ds.count, ds.dtypes[0], ds.nodata, ds.crs))
+    a = metas[0][1].a
+    e = metas[0][1].e
+    if any(abs(m[1].a - a) > 1e-9 * abs(a) or abs(m[1].e - e) > 1e-9 * abs(e) for m in metas):
+        raise DataError("the tiles' rasters have different cell sizes; the algorithm's raster grid must not depend on "
+                        "the tile")
+    west = min(m[1].c for m in metas)
+    north = max(m[1].f for m in metas)
+    east = max(m[1].c + m[2] * a for m in metas)
+    south = min(m[1].f + m[3] * e for m in metas)
+    cols, rows = int(round((east - west) / a)), int(round((south - north) / e))
+    count, dtype, nodata, crs = metas[0][4], metas[0][5], metas[0][6], metas[0][7]
+    gdal_type = {"float32": "Float32", "float64": "Float64", "uint8": "Byte", "int16": "Int16", "uint16": "UInt16",
+                 "int32": "Int32", "uint32": "UInt32"}[dtype]
+    bands = []
+    for b in range(1, count + 1):
+        sources = []
+        for path, t, w, h, *_ in metas:
+            xoff, yoff = (t.c - west) / a, (t.f - north) / e
+            sources.append(f'<SimpleSource><SourceFilename relativeToVRT="0">{_xml(path)}</SourceFilename>'
+                           f'<SourceBand>{b}</SourceBand><SrcRect xOff="0" yOff="0" xSize="{w}" ySize="{h}"/>'
+                           f'<DstRect xOff="{xoff:.6f}" yOff="{yoff:.6f}" xSize="{w}" ySize="{h}"/></SimpleSource>')
+        nd = "" if nodata is None else f"<NoDataValue>{'nan' if np.isnan(nodata) else repr(float(nodata))}</NoDataValue>"
+        bands.append(f'<VRTRasterBand dataType="{gdal_type}" band="{b}">{nd}{"".join(sources)}</VRTRasterBand>')
+    srs = f"<SRS>{_xml(crs.to_wkt())}</SRS>" if crs is not None else ""
+    vrt = (f'<VRTDataset rasterXSize="{cols}" rasterYSize="{rows}">{srs}'
+           f"<GeoTransform>{west!r}, {a!r}, 0.0, {north!r}, 0.0, {e!r}</GeoTransform>{''.join(bands)}</VRTDataset>")
+    vrt_path = out.with_name(f".{out.stem}.mosaic.vrt")
+    vrt_path.write_text(vrt, encoding="utf-8")
+    try:
+        predictor = 3 if np.dtype(dtype).kind == "f" else 2
+        with atomic_path(out, overwrite) as tmp:
+            with rasterio.open(vrt_path) as src:
+                rio_copy(src, tmp, driver="COG", COMPRESS="DEFLATE", PREDICTOR=predictor, BLOCKSIZE=512,
+                         OVERVIEWS="AUTO", RESAMPLING="AVERAGE" if count == 1 else "NEAREST", NUM_THREADS="ALL_CPUS")
+        if style_name:
+            from .io.styles import write_raster_style
+
+            with rasterio.open(out) as ds:  # the style's stretch from a reduced read, not the mosaic
+                k = max(1, int(np.ceil(max(ds.width, ds.height) / 2048)))
+                sample = ds.read(1, out_shape=(max(ds.height // k, 1), max(ds.width // k, 1)))
+            write_raster_style(out, Raster(sample, None, nodata=nodata, style=style_name), style_dirs)
+    finally:
+        vrt_path.unlink(missing_ok=True)
+    return {"width": cols, "height": rows, "cell_size": float(abs(a)), "tiles": len(metas)}
+
+
+def _xml(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def merge_layers(per_tile: Sequence[tuple[str, dict]], rules: Mapping[str, LayerMerge] | None, layer_types: Mapping[str, str],
+                 crs=None) -> dict:
+    """``[(tile, {layer: cut GeoDataFrame})]`` into ``{layer: GeoDataFrame}``: pieces of lines
+    joined where rules say so, ids renumbered over the survey, references followed."""
+    import geopandas as gpd
+    import pandas as pd
+
+    rules = dict(rules or {})
+    names = list(dict.fromkeys(n for _, layers in per_tile for n in layers))
+    # layers holding ids first, so that the layers referring to them can follow
+    order = sorted(names, key=lambda n: 0 if rules.get(n) and rules[n].id_field else 1)
+    id_maps: dict[str, dict] = {}
+    merged = {}
+    for name in order:
+        rule = rules.get(name, LayerMerge())
+        frames = []
+        for tile, layers in per_tile:
+            g = layers.get(name)
+            if g is not None and len(g):
+                frames.append(g.assign(_tile=tile))
+        if not frames:
+            empty = gpd.GeoDataFrame({}, geometry=gpd.GeoSeries([], crs=crs), crs=crs)
+            empty.attrs["geometry_type"] = layer_types.get(name, "Unknown")
+            merged[name] = empty
+            continue
+        df = gpd.GeoDataFrame(pd.concat(frames, ignore_index=True), geometry=frames[0].geometry.name, crs=frames[0].crs)
+        if rule.join and df.geom_type.isin(["LineString"]).all():
+            df = _join_pieces(df, rule)
+        else:
+            df["_members"] = [[(t, p)] for t, p in zip(df["_tile"], df["_piece"])]
+        # a deterministic order, whatever order the tiles finished in
+        first = np.array([g.coords[0][:2] if g.geom_type in ("LineString", "Point") else g.representative_point().coords[0]
+                          for g in df.geometry])
+        idx = np.lexsort((first[:, 1].round(3), first[:, 0].round(3)))
+        df = df.iloc[idx].reset_index(drop=True)
+        if rule.id_field and rule.id_field in df.columns:
+            id_map = {}
+            for new, members in enumerate(df["_members"]):
+                olds = df["_old_ids"].iat[new] if "_old_ids" in df.columns else [df[rule.id_field].iat[new]] * len(members)
+                for (tile, _), old in zip(members, olds):
+                    id_map.setdefault((tile, int(old)), new)
+            id_maps[name] = id_map
+            df[rule.id_field] = np.arange(len(df), dtype=np.int64)
+        for fld, target in rule.refs.items():
+            if fld in df.columns and target in id_maps:
+                df[fld] = _follow_refs(df[fld], df["_members"], id_maps[target])
+        df = df.drop(columns=[c for c in df.columns if str(c).startswith("_")])
+        df.attrs["geometry_type"] = layer_types.get(name, "Unknown")
+        merged[name] = df
+    return {n: merged[n] for n in names}
+
+
+def _follow_refs(values, members, id_map):
+    out = []
+    for v, mem in zip(values, members):
+        tile = mem[0][0]
+        if isinstance(v, str):
+            ids = [id_map.get((tile, int(s))) for s in v.split(",") if s.strip() != ""]
+            out.append(",".join(str(i) for i in sorted(i for i in ids if i is not None)))
+        else:
+            out.append(-1 if v is None or (isinstance(v, float) and np.isnan(v)) else id_map.get((tile, int(v)), -1))
+    return out
+
+
+def _join_pieces(df, rule: LayerMerge):
+    """Join line pieces whose cut ends meet (mutual nearest within the tolerance, from different
+    tiles, going on in the same direction)."""
+    import geopandas as gpd
+    from scipy.spatial import cKDTree
+    from shapely.geometry import LineString
+
+    coords = [np.asarray(g.coords) for g in df.geometry]
+    tiles = df["_tile"].to_numpy()
+    # ends meet in 3D where the lines have heights: wires stacked over one another stay apart
+    dim = 3 if all(c.shape[1] == 3 for c in coords) else 2
+    # every cut end: (piece, 0 = start / 1 = end)
+    ends, pts, dirs = [], [], []
+    for i, c in enumerate(coords):
+        for which, cut in ((0, df["_cut0"].iat[i]), (1, df["_cut1"].iat[i])):
+            if not cut:
+                continue
+            p, q = (c[0], c[1]) if which == 0 else (c[-1], c[-2])
+            d = (p - q)[:2]  # pointing out of the piece, across the border
+            ends.append((i, which))
+            pts.append(p[:dim])
+            dirs.append(d / max(np.hypot(*d), 1e-12))
+    partner: dict = {}
+    if ends:
+        pts, dirs = np.asarray(pts), np.asarray(dirs)
+        tree = cKDTree(pts)
+        best = {}
+        for k, (i, _) in enumerate(ends):
+            cands = [m for m in tree.query_ball_point(pts[k], rule.join_tolerance_m) if tiles[ends[m][0]] != tiles[i]
+                     and float(dirs[k] @ dirs[m]) < -0.95]  # the other piece goes on the opposite way
+            if cands:
+                best[k] = min(cands, key=lambda m: float(np.linalg.norm(pts[m] - pts[k])))
+        for k, m in best.items():
+            if best.get(m) == k:
+                partner[ends[k]] = ends[m]
+    rows, seen = [], set()
+    lengths = np.array([np.hypot(*np.diff(c[:, :2], axis=0).T).sum() for c in coords])
+    for start in range(len(coords)):
+        if start in seen:
+            continue
+        # walk to one free end of the chain
+        i, came_in = start, 0
+        visited = {start}
+        while (i, came_in) in partner:
+            j, w = partner[(i, came_in)]
+            if j in visited:
+                break
+            visited.add(j)
+            i, came_in = j, 1 - w
+        # from there, collect the chain in order
+        chain, i, enter = [], i, came_in
+        while True:
+            chain.append((i, enter))
+            seen.add(i)
+            out_end = 1 - enter
+            nxt = partner.get((i, out_end))
+            if nxt is None or nxt[0] in seen:
+                break
+            i, enter = nxt
+        parts = [coords[i] if enter == 0 else coords[i][::-1] for i, enter in chain]
+        line = parts[0]
+        for p in parts[1:]:
+            mid = (line[-1] + p[0]) / 2
+            line = np.vstack([line[:-1], mid[None, :], p[1:]])
+        members = [i for i, _ in chain]
+        base = members[int(np.argmax(lengths[members]))]
+        row = df.iloc[base].drop(labels=[df.geometry.name]).to_dict()
+        for fld, how in rule.combine.items():
+            if how == "length":
+                row[fld] = float(np.hypot(*np.diff(line[:, :2], axis=0).T).sum())
+            elif fld in df.columns:
+                vals = df[fld].iloc[members].to_numpy(dtype=float)
+                row[fld] = float({"min": np.nanmin, "max": np.nanmax, "sum": np.nansum}[how](vals)) \
+                    if np.isfinite(vals).any() else np.nan
+        row["_members"] = [(tiles[i], int(df["_piece"].iat[i])) for i in members]
+        if rule.id_field and rule.id_field in df.columns:
+            row["_old_ids"] = [int(df[rule.id_field].iat[i]) for i in members]
+        row["geometry"] = LineString(line)
+        rows.append(row)
+    return gpd.GeoDataFrame(rows, geometry="geometry", crs=df.crs)
+
+
+# --------------------------------------------------------------------------------------------
+# The survey run
+# --------------------------------------------------------------------------------------------
+
+def _write_json_atomic(path: Path, data) -> None:
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(json.dumps(data, indent=1, default=str), encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Mapping[str, Any] | None = None, *,
+               tile_size_m: float, buffer_m: float | None = None, workers: int | None = None, scheduler=None,
+               outputs: Mapping[str, str] | None = None, overwrite: bool = False, crs: str | None = None,
+               reg=None) -> dict:
+    """Run one algorithm over ``inputs`` (files, folders, globs) as one survey, tile by tile.
+
+    ``scheduler``: a dask.distributed address (``tcp://host:8786``) or Client; otherwise a local
+    pool of ``workers`` processes (default: all cores). Returns the report (as ``--json`` prints);
+    ``report["n_failed"]`` says whether any tile failed (then nothing is merged).
+    """
+    from .io.atomic import check_writable
+    from .registry import registry
+
+    t_start = time.perf_counter()
+    reg = reg or registry()
+    alg = reg.get(algorithm_id)
+    values = alg.validate_params(params or {})
+    point_inputs = [i for i in alg.inputs if not i.optional]
+    if len(point_inputs) != 1 or point_inputs[0].kind != "points" or point_inputs[0].multiple:
+        raise UsageError(f"{alg.id} cannot run as a survey (--tile-size-m): that needs an algorithm with one point "
+                         "cloud input")
+    spec = point_inputs[0]
+    if not (tile_size_m > 0 and np.isfinite(tile_size_m)):
+        raise UsageError(f"--tile-size-m {tile_size_m}: give a positive size in metres, e.g. 500")
+    if buffer_m is not None and not (buffer_m >= 0 and np.isfinite(buffer_m)):
+        raise UsageError(f"--buffer-m {buffer_m}: give a size in metres, 0 or more")
+    named = dict(outputs or {})
+    kinds = {o.name: o.kind for o in alg.outputs}
+    for n in named:
+        if n not in kinds:
+            raise UsageError(f"{alg.id} has no output {n!r}; its outputs: {', '.join(sorted(kinds))}")
+        if kinds[n] == "image":
+            raise UsageError(f"{alg.id}'s {n!r} is a picture of one run; a survey run does not make it (drop it)")
+    wanted = [o for o in alg.outputs if o.kind != "image" and (not o.optional or o.name in named)]
+    out = Path(output_dir)
+    if out.suffix.lower() in (".tif", ".gpkg", ".laz", ".las", ".json"):
+        raise UsageError(f"-o {str(out)!r}: a survey run writes into a folder (its outputs and survey.json); give a "
+                         "folder")
+    if not out.exists():
+        if not out.parent.exists():
+            raise DataError(f"output folder {str(out.parent)!r} does not exist; create it first")
+        out.mkdir()
+    elif not out.is_dir():
+        raise UsageError(f"-o {str(out)!r} is a file; a survey run writes into a folder")
+    paths = {}
+    for o in wanted:
+        if o.name in named:
+            paths[o.name] = Path(named[o.name])
+        else:
+            paths[o.name] = out / (o.name if o.kind == "points" else o.name + o.extension)
+
+    files = expand_survey_inputs(inputs)
+    catalog = build_catalog(files, crs)
+    hu = catalog.horizontal_unit_m
+    declared = alg.buffer_m(values)
+    buffer_used_m = float(buffer_m if buffer_m is not None else (declared or 0.0))
+    if buffer_m is None and declared is None:
+        log.warning("%s declares no tile buffer; tiles see no point beyond their border (set --buffer-m)", alg.id)
+    tiles = plan_tiles(catalog, tile_size_m / hu)
+    settings = {
+        "algorithm": alg.id, "version": alg.version, "parameters": values, "tile_size_m": tile_size_m,
+        "buffer_m": buffer_used_m, "crs": catalog.crs.to_wkt() if catalog.crs is not None else None,
+        "files": [[f.path, f.size, f.mtime_ns] for f in catalog.files],
+        "outputs": sorted(paths), "output_paths": {k: str(v) for k, v in sorted(paths.items())},
+    }
+    manifest_path = out / MANIFEST
+    tile_dir = out / TILE_DIR
+    state = None
+    if manifest_path.exists():
+        try:
+            state = json.loads(manifest_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            state = None
+        if state is not None and json.loads(json.dumps(state.get("settings"), default=str)) != \
+                json.loads(json.dumps(settings, default=str)):
+            if not overwrite:
+                raise UsageError(f"{str(out)!r} holds a survey run with other settings ({_what_differs(state.get('settings') or {}, settings)}); "
+                                 "pass --overwrite to start it again, or choose another folder")
+            state = None
+    if state is None:
+        for o in wanted:  # a fresh run: finished outputs of an earlier one must not be mistaken for its own
+            p = paths[o.name]
+            if o.kind != "points":
+                check_writable(p, overwrite)
+        if tile_dir.exists():
+            import shutil
+
+            shutil.rmtree(tile_dir)
+        state = {"settings": settings, "tiles": {}, "merged": False}
+    state["settings"] = settings
+    tile_dir.mkdir(exist_ok=True)
+
+    def done_before(t: Tile) -> bool:
+        rec = state["tiles"].get(t.name)
+        if not rec or rec.get("status") not in ("done", "empty"):
+            return False
+        return all(Path(p).exists() for p in rec.get("outputs", {}).values())
+
+    skipped = [t for t in tiles if done_before(t)]
+    todo = [t for t in tiles if not done_before(t)]
+    dims = None if any(o.kind == "points" for o in wanted) else spec.dims
+    base_task = {
+        "algorithm": alg.id, "params": values, "input": spec.name, "buffer": buffer_used_m / hu,
+        "crs": catalog.crs.to_wkt() if catalog.crs is not None else None, "dims": list(dims) if dims is not None else None,
+        "tile_dir": str(tile_dir.resolve()), "requested": sorted(n for n in named if n in kinds),
+        "outputs": {o.name: str(paths[o.name].resolve()) for o in wanted}, "arch": kernels.requested_arch(),
+        "entry_points": reg.entry_points,
+    }
+    tasks = []
+    for t in todo:
+        box = t.box(buffer_used_m / hu)
+        tasks.append({**base_task, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
+    if skipped:
+        log.info("%d of %d tiles were done by an earlier run; skipping them", len(skipped), len(tiles))
+
+    worker_peaks: dict = {}
+    counts = {"done": 0, "failed": 0, "empty": 0}
+    running: set = set()
+    bar = progress.bar(total=len(tiles), desc=f"{alg.id} survey", unit="tile", leave=True)
+    bar.update(len(skipped))
+
+    def on_start(name):
+        running.add(name)
+        bar.set_postfix_str(f"done {counts['done'] + counts['empty']}, failed {counts['failed']}, running {len(running)}")
+
+    def on_result(res: dict):
+        running.discard(res["tile"])
+        prev = state["tiles"].get(res["tile"], {})
+        res = dict(res)
+        res["attempts"] = prev.get("attempts", 0) + 1
+        state["tiles"][res["tile"]] = res
+        counts[res["status"]] += 1
+        if res.get("pid") is not None:
+            key = f"{res.get('host')}:{res['pid']}"
+            worker_peaks[key] = max(worker_peaks.get(key, 0.0), res.get("peak_rss_mb", 0.0))
+        if res["status"] == "failed":
+            log.error("tile %s: %s", res["tile"], res.get("error"))
+        state["merged"] = False
+        _write_json_atomic(manifest_path, state)
+        bar.set_postfix_str(f"done {counts['done'] + counts['empty']}, failed {counts['failed']}, running {len(running)}")
+        bar.update(1)
+
+    _write_json_atomic(manifest_path, state)
+    t_tiles = time.perf_counter()
+    cluster = None
+    n_workers = None
+    if tasks:
+        if scheduler is not None:
+            cluster = _run_dask(tasks, scheduler, on_result, on_start)
+            n_workers = cluster["n_workers"]
+        else:
+            n_workers = max(1, min(workers or os.cpu_count() or 1, len(tasks)))
+            _run_local(tasks, n_workers, on_result, on_start)
+    bar.close()
+    t_merge = time.perf_counter()
+
+    failed = [{"tile": n, "error": r.get("error")} for n, r in sorted(state["tiles"].items())
+              if r.get("status") == "failed" and n in {t.name for t in tiles}]
+    written = {}
+    if not failed:
+        written = _merge_outputs(alg, wanted, paths, tiles, state, catalog, reg.style_dirs, overwrite=True)
+        state["merged"] = True
+        _write_json_atomic(manifest_path, state)
+    t_end = time.perf_counter()
+    recs = [state["tiles"][t.name] for t in tiles if t.name in state["tiles"]]
+    return {
+        "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version, "parameters": values,
+        "survey": {"n_files": len(catalog.files), "n_points": catalog.n_points, "bounds": catalog.bounds,
+                   "crs": _crs_name(catalog.crs), "tile_size_m": tile_size_m, "buffer_m": buffer_used_m,
+                   "buffer_declared_m": declared},
+        "n_tiles": len(tiles), "n_done": sum(r.get("status") in ("done", "empty") for r in recs),
+        "n_skipped": len(skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),
+        "failed": failed, "outputs": written, "manifest": str(manifest_path),
+        "execution": {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
+                      "worker_peak_rss_mb": worker_peaks, "driver_peak_rss_mb": _peak_rss_mb()},
+        "timings_s": {"catalog": round(t_tiles - t_start, 3), "tiles": round(t_merge - t_tiles, 3),
+                      "merge": round(t_end - t_merge, 3), "total": round(t_end - t_start, 3)},
+    }
+
+
+def _what_differs(old: Mapping, new: Mapping) -> str:
+    keys = [k for k in new if json.dumps(old.get(k), default=str) != json.dumps(new.get(k), default=str)]
+    return ", ".join(keys) + " differ" if keys else "other settings"
+
+
+def _merge_outputs(alg: Algorithm, wanted, paths, tiles, state, catalog, style_dirs, overwrite: bool) -> dict:
+    from .io.vectors import read_vectors, write_vectors
+
+    written = {}
+    recs = [(t.name, state["tiles"][t.name]) for t in tiles if state["tiles"].get(t.name, {}).get("status") == "done"]
+    for o in wanted:
+        parts = [(name, r["outputs"][o.name]) for name, r in recs if o.name in r.get("outputs", {})]
+        target = paths[o.name]
+        if o.kind == "raster":
+            if not parts:
+                raise DataError(f"no tile gave a {o.name!r} raster; the survey holds no data for it")
+            info = merge_rasters([Path(p) for _, p in parts], target, o.style, style_dirs, overwrite)
+            written[o.name] = {"path": str(target), "kind": "raster", **info}
+        elif o.kind == "vector":
+            per_tile = [(name, read_vectors(p)) for name, p in parts]
+            types = {}
+            for _, r in recs:
+                for key, gtype in r.get("layer_types", {}).items():
+                    out_name, layer = key.split(":", 1)
+                    if out_name == o.name:
+                        types.setdefault(layer, gtype)
+            layers = merge_layers(per_tile, o.merge, types, crs=catalog.crs)
+            if not layers:
+                import geopandas as gpd
+
+                layers = {n: gpd.GeoDataFrame({}, geometry=gpd.GeoSeries([], crs=catalog.crs), crs=catalog.crs)
+                          for n in types}
+                for n, g in layers.items():
+                    g.attrs["geometry_type"] = types[n]
+            write_vectors(layers, target, style_dirs=style_dirs, overwrite=overwrite)
+            written[o.name] = {"path": str(target), "kind": "vector", "layers": {n: int(len(g)) for n, g in layers.items()}}
+        elif o.kind == "points":
+            written[o.name] = {"path": str(target), "kind": "points", "files": len(parts),
+                               "n_points": sum(int(state["tiles"][n]["stats"].get("n_core_points", 0)) for n, _ in parts)}
+        elif o.kind == "json":
+            data = {name: json.loads(Path(p).read_text(encoding="utf-8")) for name, p in parts}
+            _write_json_atomic(target, {"tiles": data})
+            written[o.name] = {"path": str(target), "kind": "json", "tiles": len(data)}
+    return written
+
+
+def split_file(path, out_dir, nx: int, ny: int, overlap: float = 0.0) -> list[Path]:
+    """Write one LAS/LAZ file as ``nx`` x ``ny`` files of equal extent (as a survey is delivered),
+    each keeping every dimension and the header's CRS; ``overlap`` (CRS units) widens each file
+    so that neighbours share points, as flight strips do. Returns the files written."""
+    from .io.points import read_points, write_points
+
+    pc = read_points(path)
+    x0, y0, x1, y1 = pc.bounds()
+    xs = np.linspace(x0, x1, nx + 1)
+    ys = np.linspace(y0, y1, ny + 1)
+    xs[-1] = ys[-1] = np.inf
+    out_dir = Path(out_dir)
+    written = []
+    for j in range(ny):
+        for i in range(nx):
+            m = (pc.x >= xs[i] - overlap) & (pc.x < xs[i + 1] + overlap) & \
+                (pc.y >= ys[j] - overlap) & (pc.y < ys[j + 1] + overlap)
+            p = out_dir / f"{Path(path).stem}_{i}_{j}{Path(path).suffix}"
+            write_points(pc.subset(m), p, overwrite=True)
+            written.append(p)
+    return written
