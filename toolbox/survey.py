@@ -71,10 +71,6 @@ class SurveyFile:
     size: int
     mtime_ns: int
 
-    def overlaps(self, box) -> bool:
-        x0, y0, x1, y1 = box
-        return self.minx <= x1 and self.maxx >= x0 and self.miny <= y1 and self.maxy >= y0
-
 
 @dataclass
 class Catalog:
@@ -410,7 +406,7 @@ def run_tile(task: Mapping[str, Any]) -> dict:
     returned with its reason). ``task`` is a plain dict, so that a local process and a Dask
     worker on another machine run the same thing."""
     t0 = time.perf_counter()
-    name = task["tile"]["name"] if "name" in task["tile"] else Tile(**task["tile"]).name
+    name = Tile(**task["tile"]).name
     base = {"tile": name, "pid": os.getpid(), "host": socket.gethostname()}
     try:
         progress.set_quiet(True)
@@ -482,7 +478,7 @@ def _write_tile_outputs(alg: Algorithm, outputs: Mapping[str, Any], task, tile: 
         elif kind == "points":
             folder = Path(task["outputs"][name])
             folder.mkdir(parents=True, exist_ok=True)
-            path = folder / f"{tile.name}{Path(task['point_ext']).suffix if task.get('point_ext') else '.laz'}"
+            path = folder / f"{tile.name}.laz"
             write_points(value.subset(core) if len(value) == len(core) else value, path, overwrite=True)
         elif kind == "json":
             path = tile_dir / f"{name}.json"
