@@ -292,10 +292,13 @@ class Conductor:
 
 
 def tiles(x, y, size: float, overlap: float):
-    """(x0, y0, mask) of square tiles of ``size`` overlapping by ``overlap``."""
+    """(x0, y0, mask) of square tiles of ``size`` overlapping by ``overlap``, starting at multiples
+    of ``size - overlap``: a tile holds the same points whatever the extent of the input, so a
+    survey cut into pieces finds what the whole finds."""
     step = size - overlap
-    xs = np.arange(x.min(), max(x.max() - overlap, x.min()) + 1e-9, step)
-    ys = np.arange(y.min(), max(y.max() - overlap, y.min()) + 1e-9, step)
+    x_start, y_start = np.floor(x.min() / step) * step, np.floor(y.min() / step) * step
+    xs = np.arange(x_start, max(x.max() - overlap, x_start) + 1e-9, step)
+    ys = np.arange(y_start, max(y.max() - overlap, y_start) + 1e-9, step)
     for x0 in xs:
         mx = (x >= x0) & (x < x0 + size)
         if not mx.any():

@@ -42,13 +42,55 @@ def occupied_cells(x, y, cell: float) -> int:
     return int(np.count_nonzero(occ))
 
 
+MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense (mobile) scans
+
+
+def local_surface_density(x, y, weight=None, cell: float = 1.0, block_cells: int = 5,
+                          radius_blocks: int = 10) -> np.ndarray:
+    """Per point: the points (``weight``: those that count, e.g. first returns) per occupied
+    ``cell`` x ``cell`` square in the window of (2 * ``radius_blocks`` + 1)^2 blocks of
+    ``block_cells`` cells around its block (about +-50 m at the defaults): the survey's surface
+    density as one run over a small file measures it, made local so that strips, overlaps and a
+    mobile scanner's falling range count where they are. Cells and blocks sit on multiples of
+    their size and every sum is an integer, so a point gets the same value in any piece of the
+    survey that holds its window: a tiled run decides as the whole does."""
+    n = len(x)
+    if n == 0:
+        return np.zeros(0)
+    c = np.floor(np.asarray(x) / cell).astype(np.int64)
+    r = np.floor(np.asarray(y) / cell).astype(np.int64)
+    bc, br = np.floor_divide(c, block_cells), np.floor_divide(r, block_cells)
+    bc -= bc.min()
+    br -= br.min()
+    cols, rows = int(bc.max()) + 1, int(br.max()) + 1
+    block = br * cols + bc
+    w = None if weight is None else np.asarray(weight, np.float64)
+    points = np.bincount(block, weights=w, minlength=rows * cols).round().reshape(rows, cols)
+    # occupied cells per block: distinct cells, each counted once (in the block of its first point)
+    c -= c.min()
+    _, first = np.unique((r - r.min()) * (int(c.max()) + 1) + c, return_index=True)
+    occupied = np.bincount(block[first], minlength=rows * cols).astype(np.float64).reshape(rows, cols)
+
+    def window_sum(g):  # box sums through an integral image (exact: integer-valued floats)
+        h = radius_blocks
+        s = np.zeros((rows + 1, cols + 1))
+        s[1:, 1:] = g.cumsum(0).cumsum(1)
+        r0, r1 = np.clip(np.arange(rows) - h, 0, rows), np.clip(np.arange(rows) + h + 1, 0, rows)
+        c0, c1 = np.clip(np.arange(cols) - h, 0, cols), np.clip(np.arange(cols) + h + 1, 0, cols)
+        return s[r1][:, c1] - s[r0][:, c1] - s[r1][:, c0] + s[r0][:, c0]
+
+    density = window_sum(points) / np.maximum(window_sum(occupied), 1.0)
+    return density.ravel()[block] / (cell * cell)
+
+
 def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
                   surface_density: float | None = None, max_axis_slope: float = 0.7):
     """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.
 
     Roofs and crowns are surfaces *as dense as the survey's*: with ``surface_density`` (points per
-    square unit) a planar or rugged neighbourhood also needs half that density within radius 1,
-    which parallel wires (flat or tent-shaped, but sparse) never have."""
+    square unit, one value or one per point: ``local_surface_density``) a planar or rugged
+    neighbourhood also needs half that density within radius 1, which parallel wires (flat or
+    tent-shaped, but sparse) never have."""
     n = len(xyz)
     if n < 4:
         return np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
@@ -59,12 +101,19 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     # within 1". When need > k one search bounded at 1 answers it and gives the k-neighbourhoods
     # of every point with k neighbours within 1 (most points); an unbounded one the rest's.
     # (Two searches, k for all and need for the dense ones, took 1.5x as long on the corridor.)
-    need = int(np.ceil(0.5 * np.pi * surface_density)) if surface_density is not None else 0
-    if need > k:
-        dist, idx = tree.query(xyz, k=min(need, n), distance_upper_bound=1.0 + 1e-9, workers=-1)
+    # A point's neighbourhood (used below) is its first max(k, need) neighbours within 1.
+    need = np.zeros(n, np.int64)
+    if surface_density is not None:
+        need = np.ceil(0.5 * np.pi * np.broadcast_to(np.asarray(surface_density, np.float64), (n,))).astype(np.int64)
+    width = int(min(max(k, need.max()), n, MAX_DENSITY_NEIGHBOURS))
+    if width > k:
+        dist, idx = tree.query(xyz, k=width, distance_upper_bound=1.0 + 1e-9, workers=-1)
         far = np.flatnonzero(~np.isfinite(dist[:, k - 1]))
         if len(far):
             dist[far, :k], idx[far, :k] = tree.query(xyz[far], k=k, workers=-1)
+        beyond = np.arange(width)[None, :] >= np.maximum(need, k)[:, None]
+        if beyond.any():
+            dist[beyond], idx[beyond] = np.inf, n
     else:
         dist, idx = tree.query(xyz, k=k, workers=-1)
         dist, idx = dist.reshape(n, k), idx.reshape(n, k)
@@ -73,11 +122,16 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     share = ev / (ev.sum(axis=1, keepdims=True) + 1e-12)
     rugged = share[:, 0] >= rugged_share
     planar = ~rugged & (share[:, 1] >= planar_share)
-    if need > 1:
-        for mask in (planar, rugged):
-            p = np.flatnonzero(mask)
-            if len(p):
-                mask[p] = dist[p, need - 1] <= 1.0 if need <= n else False
+    for mask in (planar, rugged):
+        p = np.flatnonzero(mask & (need > 1))
+        if len(p):
+            within = need[p] <= width
+            ok = np.zeros(len(p), bool)
+            ok[within] = dist[p[within], need[p[within]] - 1] <= 1.0
+            if (~within).any():  # denser than the neighbourhoods reach: count
+                ok[~within] = tree.query_ball_point(xyz[p[~within]], r=1.0, return_length=True,
+                                                    workers=-1) >= need[p[~within]]
+            mask[p] = ok
     if planar.any():
         planar &= ~ribbons(xyz, idx, dist, planar, ~rugged)
     linear = ~rugged & ~planar
@@ -690,9 +744,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     if not near.any():
         return []
     x, y, hag = x[near], y[near], hag[near]
-    x0, y0 = x.min(), y.min()
-    c = ((x - x0) / cell_m).astype(np.int64)
-    r = ((y - y0) / cell_m).astype(np.int64)
+    # cells on multiples of cell_m: the same cells whatever the extent of the input
+    x0, y0 = np.floor(x.min() / cell_m) * cell_m, np.floor(y.min() / cell_m) * cell_m
+    c = np.floor((x - x0) / cell_m).astype(np.int64)
+    r = np.floor((y - y0) / cell_m).astype(np.int64)
     rows, cols = int(r.max()) + 1, int(c.max()) + 1
     flat = r * cols + c
     top = np.full(rows * cols, -np.inf)
@@ -713,6 +768,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             wire_top[i] = float(np.max(span_end_hag[nb]))
     tall = has & (wire_top > 0) & (top >= top_share * wire_top)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
+    structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms
     lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
     lab = lab.ravel()
     shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
@@ -755,19 +811,42 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             if n_past >= n_ends:
                 continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
-        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), cells,
+        standing = structure & (top >= 0.5 * height)  # legs and body reach up to the head; bushes do not
+        body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
+        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                            (x0, y0, cell_m, rows, cols)))
     return found
 
 
-def pylon_points(p: Pylon, x, y):
-    """Points inside the tower's footprint cells (on the grid it was found on)."""
+def _grow_body(cells, structure, centres, centre, reach_m):
+    """The tower's footprint: its tall cells (head and arms) and the ``structure`` cells connected
+    to them within ``reach_m`` of its centre (the body widening to its legs below the head)."""
+    from scipy import ndimage
+
+    rows, cols = structure.shape
+    seed = np.zeros(rows * cols, bool)
+    seed[cells] = True
+    allowed = structure.ravel() & (np.hypot(*(centres - centre).T) <= reach_m)
+    grown = ndimage.binary_propagation(seed.reshape(rows, cols), structure=np.ones((3, 3), bool),
+                                       mask=(allowed | seed).reshape(rows, cols))
+    return np.flatnonzero(grown.ravel())
+
+
+def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
+    """Points inside the tower's footprint cells (on the grid it was found on); with ``hag``
+    (heights above ground) only those of the structure hanging together from its top down: below
+    the first gap of more than ``max_gap_m`` stand fences, bushes and cabinets at its foot."""
     x0, y0, cell_m, rows, cols = p.grid
     c = np.floor((x - x0) / cell_m).astype(np.int64)
     r = np.floor((y - y0) / cell_m).astype(np.int64)
     ok = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
     inside = np.zeros(len(x), bool)
     inside[ok] = np.isin(r[ok] * cols + c[ok], p.cells)
+    if hag is not None and inside.any():
+        h = np.sort(hag[inside])[::-1]
+        gaps = np.flatnonzero(h[:-1] - h[1:] > max_gap_m)
+        if len(gaps):
+            inside &= hag >= h[gaps[0]]
     return inside
 
 

@@ -18,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import conductors_3d, occupied_cells, shape_classes
+    from .core import conductors_3d, local_surface_density, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -51,10 +51,13 @@ def _run(inputs, params, ctx):
         raise DataError(f"input {pc.source!r}: only {len(idx)} points between {params['height_min_m']} and {h_max:.1f} m "
                         "above ground; check height_min_m / height_max_m")
     xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
-    # the survey's surface density: points per occupied square metre (corridor strips included)
-    surface_density = len(pc) / max(occupied_cells(pc.x, pc.y, 1.0 / hu), 1)  # 1 m cells
-    if rn is not None and np.any(rn > 0) and params["first_returns_only"]:
-        surface_density *= float(np.mean(rn == 1))
+    # the density of the surfaces around each candidate: first returns per occupied square metre
+    # within density_radius_m (roofs and crowns are that dense, wires are not)
+    first = (rn == 1) if rn is not None and np.any(rn > 0) and params["first_returns_only"] else None
+    block_m = 5.0
+    density = local_surface_density(pc.x * hu, pc.y * hu, first, cell=1.0, block_cells=int(block_m),
+                                    radius_blocks=int(np.ceil(params["density_radius_m"] / block_m)))
+    surface_density = density[idx]
     linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
                                            params["planar_share"], surface_density)
     keep = idx[linear]
@@ -95,23 +98,27 @@ def _run(inputs, params, ctx):
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and
             abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
     if params["validate_3d"]:
-        keep_lines = sorted(good)
-        new_id = np.full(len(geo) + 1, -1, np.int64)  # old conductor -> new (-1: dropped; -1 stays -1)
-        new_id[keep_lines] = np.arange(len(keep_lines))
-        line_of = new_id[line_of]
-        wire_of_pt[line_of < 0] = -1
-        lines = _select_conductors(lines, keep_lines)
-        geo = [geo[i] for i in keep_lines]
-        spans = [sp for sp in spans if new_id[sp.conductor] >= 0]
-        for sp in spans:
-            sp.conductor = int(new_id[sp.conductor])
+        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
     timings["conductors_3d_s"] = time.perf_counter() - t
+
+    # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
+    # footprint is one of its arms, not a conductor
+    t = time.perf_counter()
+    conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
+    conductor_of[keep] = line_of
+    pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu, dtm, params)
+    arms = _arms(lines["conductors"], found, hu)
+    if arms:
+        kept = [i for i in range(len(geo)) if i not in arms]
+        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
+        conductor_of[keep] = line_of
+        pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu,
+                                          dtm, params)
+    timings["pylons_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
-    conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
-    conductor_of[keep] = line_of
     for li in range(len(cond)):
         h = hag[conductor_of == li]
         hmin.append(float(h.min()) if len(h) else np.nan)
@@ -137,10 +144,6 @@ def _run(inputs, params, ctx):
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
-    # 6. pylons: tall columns under the lines where spans end
-    t = time.perf_counter()
-    pylons, tower_pt = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params)
-    timings["pylons_s"] = time.perf_counter() - t
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
               "crossings": lines["crossings"], "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
@@ -158,7 +161,8 @@ def _run(inputs, params, ctx):
             "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
             "leave cell_size_m automatic or set it to a third of their spacing", len(th), len(keep), cell_used)
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
-             "height_max_m_used": round(h_max, 2), "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "height_max_m_used": round(h_max, 2),
+             "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None, "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
@@ -176,6 +180,8 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
     ends, end_z, span_lines = [], [], []
     for sp in spans:
+        if not sp.rms <= params["max_rms_3d_m"]:  # no catenary fits it: no evidence of a span ending here
+            continue
         a, d, _, _ = geo[sp.conductor]
         normal = np.array([-d[1], d[0]])
         e = [a + s_ * d + (sp.offset + sp.offset_slope * s_) * normal for s_ in (sp.s_from, sp.s_to)]
@@ -189,10 +195,11 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
                         lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines)
     tower = np.zeros(len(pc), bool)
-    cand = np.flatnonzero(np.isfinite(hag) & (hag >= 0.5) & (conductor_of < 0) & (ground_cls != 2))
+    # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
+    cand = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2))
     rows, geoms = [], []
     for i, p in enumerate(found):
-        inside = pylon_points(p, pc.x[cand] * hu, pc.y[cand] * hu)
+        inside = pylon_points(p, pc.x[cand] * hu, pc.y[cand] * hu, hag[cand])
         tower[cand[inside]] = True
         x, y = p.x / hu, p.y / hu
         z = float(dtm.sample(np.array([x]), np.array([y]))[0])
@@ -202,7 +209,54 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     gdf = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"pylon": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     gdf.attrs["geometry_type"] = "Point Z"
-    return gdf, tower
+    return gdf, tower, found
+
+
+def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0) -> set:
+    """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
+    ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
+    conductor reaching the same tower at ``min_angle_deg`` or more: straight, level lines that
+    never leave the tower, across its line, are its arms. (A short wire to a pole with nothing
+    across it stays a wire.)"""
+    if not found or not len(cond):
+        return set()
+    import numpy as np
+    from shapely.geometry import LineString, Point
+
+    towers = []
+    for p in found:
+        x0, y0, cell_m, rows, cols = p.grid
+        r, c = np.divmod(np.asarray(p.cells), cols)
+        far = np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max() + cell_m
+        towers.append((p.x, p.y, max(end_radius_m, far)))
+    lines = [LineString(np.asarray(g.coords)[:, :2] * hu) for g in cond.geometry]
+    ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
+    unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
+    arms = set()
+    for x, y, reach in towers:
+        inside = [i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= reach).all()]
+        at = Point(x, y)
+        for i in inside:
+            across = [j for j, g in enumerate(lines) if j not in inside and g.distance(at) <= reach
+                      and abs(float(unit[i] @ unit[j])) <= np.cos(np.radians(min_angle_deg))]
+            if across:
+                arms.add(i)
+    return arms
+
+
+def _keep_conductors(keep_lines, lines, geo, spans, line_of, wire_of_pt):
+    """Only the given conductors (renumbered) in the layers, the geometry, the spans and the
+    per-point conductor and wire of the 3D step."""
+    import numpy as np
+
+    new_id = np.full(len(geo) + 1, -1, np.int64)  # old conductor -> new (-1: dropped; -1 stays -1)
+    new_id[keep_lines] = np.arange(len(keep_lines))
+    line_of = new_id[line_of]
+    wire_of_pt = np.where(line_of < 0, -1, wire_of_pt)
+    spans = [sp for sp in spans if new_id[sp.conductor] >= 0]
+    for sp in spans:
+        sp.conductor = int(new_id[sp.conductor])
+    return _select_conductors(lines, keep_lines), [geo[i] for i in keep_lines], spans, line_of, wire_of_pt
 
 
 def _select_conductors(lines: dict, keep: list) -> dict:
@@ -225,11 +279,12 @@ def _select_conductors(lines: dict, keep: list) -> dict:
 
 
 def _tile_buffer_m(p) -> float:
-    """Survey runs: a Hough tile's width around each survey tile (a wire is seen as far as one
-    accumulator sees it), and the ground filter the chain calls at its defaults its largest
-    window (50 m) and a few cells."""
+    """Survey runs: every Hough tile that reaches a survey tile whole (Hough tiles sit on a fixed
+    grid, so it then votes as in the whole survey), and around each of its points what decides
+    that point: the density window (density_radius_m and a block) and the ground filter's largest
+    window at its defaults (50 m and a few cells)."""
     hough = p["tile_size_m"] if p["tile_size_m"] > 0 else 200.0
-    return max(hough, 60.0 if p["ground"] == "filter" else 0.0)
+    return hough + max(p["density_radius_m"] + 5.0, 60.0 if p["ground"] == "filter" else 0.0)
 
 
 # how the layers of the tiles of a survey become one: lines cut at tile borders joined, the
@@ -268,6 +323,9 @@ def toolbox_algorithms():
                       "distribution lines, transmission lines sit at 10-60 m; auto: up to the highest points "
                       "(99.95th percentile)", unit="m", minimum=0.0, maximum=1000.0, allow_auto=True),
             Parameter("first_returns_only", bool, True, "keep first returns only (ignored when the file has no return numbers)"),
+            Parameter("density_radius_m", float, 200.0, "surface density (first returns per occupied m²) measured "
+                      "around each candidate within this radius: a roof or crown neighbourhood must hold half of it "
+                      "within 1 m, sparse wires never do", unit="m", minimum=5.0, maximum=5000.0),
             Parameter("neighbours", int, 12, "points in each shape (eigenvalue) neighbourhood", minimum=4, maximum=100),
             Parameter("rugged_share", float, 0.04, "smallest-eigenvalue share above which a neighbourhood is "
                       "vegetation", minimum=0.0, maximum=0.34),
