@@ -22,6 +22,7 @@ import laspy
 import numpy as np
 
 import roof_peers
+from survey_bench import bench_survey
 import toolbox
 from toolbox.io.points import read_points
 from toolbox_plugins.morph_dtm.evaluation import ground_errors
@@ -899,7 +900,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small inputs only")
     ap.add_argument("--no-10m", action="store_true",
                     help="skip the large synthetic inputs (the 10-million-point tile, the 3 km corridor)")
-    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines", "roofs"), action="append",
+    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey"),
+                    action="append",
                     help="run only these sections (repeatable); results.json then holds only them")
     args = ap.parse_args(argv)
     out_dir = ROOT / "bench-output"
@@ -914,7 +916,7 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines", "roofs"))
+        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey"))
         if "ground" in want:
             rows += bench_ground(tmp, not args.no_10m, args.quick)
         if "isprs" in want:
@@ -927,6 +929,8 @@ def main(argv=None) -> int:
             rows += bench_powerlines(tmp, large=not (args.no_10m or args.quick), quick=args.quick)
         if "roofs" in want:
             rows += bench_roofs(tmp, out_dir)
+        if "survey" in want:
+            rows += bench_survey(tmp, quick=args.quick or args.no_10m)
     check_end = machine_check()
     print_machine_check("end", check_end)
     rows.append({"case": "machine check", "start": check_start, "end": check_end})

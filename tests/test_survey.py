@@ -235,6 +235,67 @@ def test_dtm_survey_on_a_two_worker_dask_cluster_equals_the_whole(survey, tmp_pa
     assert diff <= 0.01 and only == 0
 
 
+def _write_copc(src: Path, dst: Path, depth: int = 3) -> int:
+    """``src`` as a COPC file (an octree of ``depth`` levels, more points deeper, each in the node
+    that holds it at its level) through copclib; returns the number of nodes."""
+    import copclib
+    import laspy
+
+    full = laspy.read(src)
+    rec = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))  # the standard fields only
+    rec.header.scales, rec.header.offsets = full.header.scales, full.header.offsets
+    for name in laspy.PointFormat(6).dimension_names:
+        rec[name] = full[name]
+    records = rec.points.array
+    h = full.header
+    mins, maxs = np.asarray(h.mins), np.asarray(h.maxs)
+    half = float((maxs - mins).max()) / 2 + 1.0
+    scale, offset = copclib.Vector3(*map(float, h.scales)), copclib.Vector3(*map(float, h.offsets))
+    wkt = h.parse_crs().to_wkt()
+    writer = copclib.FileWriter(str(dst), copclib.CopcConfigWriter(6, scale, offset, wkt))
+    info = writer.copc_config.copc_info
+    info.center_x, info.center_y, info.center_z = map(float, mins + half)  # the cube from the minimum corner
+    info.halfsize, info.spacing = half, 2 * half / 128
+    writer.copc_config.las_header.min = copclib.Vector3(*map(float, mins))
+    writer.copc_config.las_header.max = copclib.Vector3(*map(float, maxs))
+    xyz = np.c_[full.x, full.y, full.z]
+    share = 8.0 ** np.arange(depth + 1)
+    level = np.random.default_rng(0).choice(depth + 1, size=len(xyz), p=share / share.sum())
+    n_nodes = 0
+    for d in range(depth + 1):
+        ijk = np.clip(np.floor((xyz - mins) / (2 * half / 2 ** d)).astype(np.int64), 0, 2 ** d - 1)
+        sel = np.flatnonzero(level == d)
+        keys, inv = np.unique(ijk[sel], axis=0, return_inverse=True)
+        for k, (i, j, kk) in enumerate(keys):
+            raw = np.frombuffer(records[sel[inv.ravel() == k]].tobytes(), np.int8)
+            points = copclib.Points.Unpack(copclib.VectorChar(raw), 6, 0, scale, offset)
+            writer.AddNode(copclib.VoxelKey(d, int(i), int(j), int(kk)), points)
+            n_nodes += 1
+    writer.Close()
+    return n_nodes
+
+
+def test_copc_survey_reads_each_tile_by_bounds_and_equals_the_whole(survey, tmp_path):
+    """A COPC file in a survey: each tile decodes only the octree nodes that reach it and its
+    buffer, and the DTM is the one of a run over the whole LAZ file."""
+    pytest.importorskip("copclib", reason="copclib (test extra) writes the COPC file; laspy writes none")
+    import laspy
+
+    copc = tmp_path / "corridor.copc.laz"
+    assert _write_copc(survey["whole"], copc) > 9
+    with laspy.CopcReader.open(copc) as r:
+        n = len(r.query())  # what the octree holds (copclib drops a point lying on a node's face now and then)
+    assert n >= len(laspy.read(survey["whole"]).points) - 2
+    rep = run_survey("dtm", [copc], tmp_path / "out", tile_size_m=100, workers=2)
+    assert rep["n_failed"] == 0
+    tiles = json.loads((tmp_path / "out" / "survey.json").read_text())["tiles"].values()
+    decoded = [t["stats"]["n_decoded_points"] for t in tiles if t["status"] == "done"]
+    assert max(decoded) < 0.8 * n  # no tile decodes the whole file
+    assert sum(t["stats"]["n_core_points"] for t in tiles if t["status"] == "done") == n
+    diff, only, both = _grid_diff(survey["dtm"], tmp_path / "out" / "dtm.tif")
+    assert diff <= 0.01 and only == 0 and both > 50_000
+
+
 def _children(pid: int) -> dict[int, bytes]:
     kids = {}
     for p in Path("/proc").iterdir():

@@ -70,6 +70,7 @@ class SurveyFile:
     count: int
     size: int
     mtime_ns: int
+    copc: bool = False  # a Cloud Optimized Point Cloud: read by bounds through its octree
 
 
 @dataclass
@@ -148,6 +149,7 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
             with laspy.open(path) as reader:
                 hdr = reader.header
                 mins, maxs, count = hdr.mins, hdr.maxs, int(hdr.point_count)
+                copc = any(v.user_id == "copc" and v.record_id == 1 for v in hdr.vlrs)
                 file_crs = None
                 if user_crs is None:
                     try:
@@ -159,7 +161,7 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
                             "repair or remove it from the survey") from None
         st = os.stat(path)
         files.append(SurveyFile(str(Path(path).resolve()), float(mins[0]), float(mins[1]), float(maxs[0]),
-                                float(maxs[1]), count, st.st_size, st.st_mtime_ns))
+                                float(maxs[1]), count, st.st_size, st.st_mtime_ns, copc))
         crss.append(file_crs)
     if user_crs is not None:
         survey_crs = user_crs
@@ -236,10 +238,26 @@ def plan_tiles(catalog: Catalog, tile_size: float) -> list[Tile]:
     return tiles
 
 
+def _without_copc_records(header):
+    """A copy of a COPC file's header for the tile's outputs: a tile's points are no octree, and
+    laspy writes no COPC records."""
+    import copy
+
+    out = copy.deepcopy(header)
+    for name in ("vlrs", "evlrs"):
+        records = getattr(out, name, None)
+        if records:
+            kept = [v for v in records if getattr(v, "user_id", "") != "copc"]
+            records.clear()
+            records.extend(kept)
+    return out
+
+
 def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, dims=None,
               chunk_points: int = READ_CHUNK_POINTS):
     """The points of the tile and its buffer from ``files``, read in chunks (memory holds what
-    the box keeps plus one chunk). Returns (PointCloud, mask of the points in the tile's core).
+    the box keeps plus one chunk; of a COPC file only the octree nodes that reach the box). Returns
+    (PointCloud, mask of the points in the tile's core, points decoded).
     ``dims``: the dimensions to keep besides x, y, z (None: all those every file has)."""
     import laspy
 
@@ -248,17 +266,22 @@ def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, 
     bx0, by0, bx1, by1 = tile.box(buffer)
     xs, ys, zs, parts = [], [], [], []
     header, names = None, None
+    decoded = 0
     for f in files:
         seen = 0
         try:
-            with laspy.open(f.path) as reader:
+            with (laspy.CopcReader.open(f.path) if f.copc else laspy.open(f.path)) as reader:
                 hdr = reader.header
                 file_names = [n for n in hdr.point_format.dimension_names if n not in ("X", "Y", "Z")]
                 if header is None:
-                    header = hdr
+                    header = _without_copc_records(hdr) if f.copc else hdr
                 names = file_names if names is None else [n for n in names if n in file_names]
                 keep_names = file_names if dims is None else [n for n in file_names if n in dims]
-                for chunk in reader.chunk_iterator(chunk_points):
+                if f.copc:  # only the octree nodes that reach the box are decoded
+                    chunks = [reader.query(bounds=laspy.Bounds(mins=np.array([bx0, by0]), maxs=np.array([bx1, by1])))]
+                else:
+                    chunks = reader.chunk_iterator(chunk_points)
+                for chunk in chunks:
                     seen += len(chunk)
                     x = np.asarray(chunk.x)
                     y = np.asarray(chunk.y)
@@ -272,7 +295,8 @@ def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, 
         except _decode_errors() as exc:
             raise DataError(f"input {f.path!r} is truncated or corrupt after {seen} points "
                             f"({' '.join(str(exc).split())[:120]}); repair or re-download it") from None
-        if seen != f.count:
+        decoded += seen
+        if not f.copc and seen != f.count:
             raise DataError(f"input {f.path!r} is truncated: the header promises {f.count} points, the file holds "
                             f"{seen}; re-download or re-export it")
     keep = [n for n in (names or []) if dims is None or n in dims]
@@ -281,7 +305,7 @@ def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, 
     pc = PointCloud(x=cat(xs), y=cat(ys), z=cat(zs), fields=fields, source=f"tile {tile.name}", header=header)
     _apply_crs(pc, crs, header)
     core = (pc.x >= tile.x0) & (pc.x < tile.x1) & (pc.y >= tile.y0) & (pc.y < tile.y1)
-    return pc, core
+    return pc, core, decoded
 
 
 # --------------------------------------------------------------------------------------------
@@ -423,8 +447,9 @@ def run_tile(task: Mapping[str, Any]) -> dict:
         from .io.points import parse_crs
 
         crs = parse_crs(task["crs"]) if task.get("crs") else None
-        pc, core = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"))
-        stats = {"n_points": int(len(pc)), "n_core_points": int(core.sum()), "read_s": round(time.perf_counter() - t0, 3)}
+        pc, core, decoded = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"))
+        stats = {"n_points": int(len(pc)), "n_core_points": int(core.sum()), "n_decoded_points": decoded,
+                 "read_s": round(time.perf_counter() - t0, 3)}
         if not core.any():
             return {**base, "status": "empty", "stats": stats, "outputs": {}, "layer_types": {},
                     "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}

@@ -1,0 +1,111 @@
+"""Survey runs at growing size: peak memory of the driver and of each worker, and throughput with
+1 and 2 local workers and a 2-worker Dask LocalCluster (issue #19).
+
+A synthetic survey of up to ten 640 m x 640 m terrain files (about 5 M points each, in a row of
+five by two; cached in bench-output/cache/survey), run as the survey of its first 1, 3 and 10
+files: `toolbox run dtm FILES -o OUT --tile-size-m 320` in a fresh process each time, so the
+driver's peak is the run's own. Memory should stay flat while the survey grows: a worker holds
+one tile and its buffer, the driver the catalog and the manifest.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CACHE = ROOT / "bench-output" / "cache" / "survey"
+FILE_M = 640.0
+TILE_M = 320.0
+COLUMNS = 5
+TOOLBOX = [str(Path(sys.executable).parent / "toolbox")]  # the console script of this environment
+
+
+def survey_files(n: int = 10, density_ppm2: float = 12.0) -> list[Path]:
+    """The survey's files (generated once, two at a time, then reused)."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+
+    def make(i: int) -> Path:
+        path = CACHE / f"terrain_{i:02d}.laz"
+        if not path.exists():
+            part = path.with_suffix(".part.laz")
+            col, row = i % COLUMNS, i // COLUMNS
+            subprocess.run([*TOOLBOX, "run", "synthetic-scene", "-o", str(part), "--quiet", "--overwrite",
+                            "--set", "kind=terrain", "--set", f"seed={100 + i}",
+                            "--set", f"width_m={FILE_M}", "--set", f"height_m={FILE_M}",
+                            "--set", f"density_ppm2={density_ppm2}",
+                            "--set", f"origin_x={512000.0 + col * FILE_M}",
+                            "--set", f"origin_y={5403000.0 + row * FILE_M}"], check=True, capture_output=True)
+            for extra in part.parent.glob(part.stem.replace(".part", "") + ".part*"):
+                if extra != part:
+                    extra.unlink()  # the truth files next to it: not needed here
+            part.rename(path)
+        return path
+
+    with ThreadPoolExecutor(2) as pool:
+        return list(pool.map(make, range(n)))
+
+
+def run_survey_cli(files: list[Path], out: Path, workers: int | None = None, scheduler: str | None = None) -> dict:
+    cmd = [*TOOLBOX, "run", "dtm", *map(str, files), "-o", str(out), "--tile-size-m", str(TILE_M),
+           "--json", "--quiet", "--overwrite"]
+    cmd += ["--scheduler", scheduler] if scheduler else ["--workers", str(workers)]
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    if r.returncode != 0:
+        raise RuntimeError(f"survey run failed: {r.stderr.strip()[-500:]}")
+    rep = json.loads(r.stdout)
+    tiles = json.loads((out / "survey.json").read_text())["tiles"].values()
+    rep["max_tile_points"] = max(t.get("stats", {}).get("n_points", 0) for t in tiles)
+    return rep
+
+
+def bench_survey(tmp: Path, quick: bool = False) -> list[dict]:
+    sizes = (1, 3) if quick else (1, 3, 10)
+    files = survey_files(max(sizes))
+    rows = []
+    print("\nsurvey runs: dtm over 640 m terrain files (~5 M points each), 320 m tiles, buffer as declared; "
+          "peak RSS of the driver and the largest worker (MB); Mpt/s = survey points / wall seconds")
+    print(f"{'case':44s} {'points':>11s} {'tiles':>5s} {'tile+buf pts':>12s} {'seconds':>8s} {'Mpt/s':>6s} "
+          f"{'driver MB':>9s} {'worker MB':>9s}")
+
+    def row(case, rep):
+        ex, n = rep["execution"], rep["survey"]["n_points"]
+        secs = rep["timings_s"]["total"]
+        r = {"case": case, "points": n, "tiles": rep["n_tiles"], "max_tile_points": rep["max_tile_points"],
+             "seconds": secs, "mpts_per_s": n / secs / 1e6, "driver_peak_rss_mb": ex["driver_peak_rss_mb"],
+             "worker_peak_rss_mb": max(ex["worker_peak_rss_mb"].values()),
+             "workers_seen": len(ex["worker_peak_rss_mb"])}
+        print(f"{case:44s} {n:11,d} {r['tiles']:5d} {r['max_tile_points']:12,d} {secs:8.1f} {r['mpts_per_s']:6.2f} "
+              f"{r['driver_peak_rss_mb']:9.0f} {r['worker_peak_rss_mb']:9.0f}", flush=True)
+        rows.append(r)
+
+    for k in sizes:
+        row(f"survey {k:2d}x, 2 local workers", run_survey_cli(files[:k], tmp / f"survey_{k}", workers=2))
+    k = 3
+    row(f"survey {k:2d}x, 1 local worker", run_survey_cli(files[:k], tmp / "survey_w1", workers=1))
+    try:
+        import distributed
+    except ImportError:
+        print("  (dask.distributed not installed: no cluster row; pip install '.[cluster]')")
+        return rows
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        row(f"survey {k:2d}x, 2-worker Dask LocalCluster",
+            run_survey_cli(files[:k], tmp / "survey_dask", scheduler=cluster.scheduler_address))
+    base = [r for r in rows if r["case"].startswith(f"survey {sizes[0]:2d}x")][0]
+    top = rows[len(sizes) - 1]
+    print(f"  growth {sizes[0]}x -> {sizes[-1]}x: points x{top['points'] / base['points']:.1f}, driver peak "
+          f"x{top['driver_peak_rss_mb'] / base['driver_peak_rss_mb']:.2f}, worker peak "
+          f"x{top['worker_peak_rss_mb'] / base['worker_peak_rss_mb']:.2f}")
+    return rows
+
+
+if __name__ == "__main__":
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        bench_survey(Path(d), quick="--quick" in sys.argv)
