@@ -15,7 +15,7 @@ from toolbox import kernels
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, occupied_cells,
+from toolbox_plugins.powerlines.core import (_two_means_1d, catenary, fit_catenary, line_fit, local_surface_density,
                                              parabola_fit, peel_catenaries, split_spans)
 from toolbox_plugins.powerlines.evaluation import conductor_hits
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
@@ -788,14 +788,24 @@ def test_closed_form_line_and_parabola_equal_polyfit(seed):
     assert parabola_fit(np.array([1.0, 1.0, 2.0]), np.array([1.0, 3.0, 4.0])) == pytest.approx((0.0, 2.0, 0.0))
 
 
-@pytest.mark.parametrize("spread", [300.0, 2e6])  # a dense grid, and a huge sparse extent (distinct cells counted)
-def test_occupied_cells_counts_distinct_cells(spread):
+def test_local_surface_density_counts_points_per_occupied_cell_in_its_window_in_any_piece():
+    """Against a count by hand: points (first returns) over distinct occupied 1 m cells in the
+    5 m blocks within the radius; and the same value for a point in any piece holding its window."""
     rng = np.random.default_rng(4)
-    x = 512000 + rng.uniform(0, spread, 20000)
-    y = 5403000 + rng.uniform(0, 300.0, 20000)
-    for cell in (1.0, 0.5, 1 / 0.3048):
-        want = len({(int(a), int(b)) for a, b in zip(np.floor(x / cell), np.floor(y / cell))})
-        assert occupied_cells(x, y, cell) == want
+    x = 512000 + rng.uniform(0, 300.0, 30000)
+    y = 5403000 + rng.uniform(0, 120.0, 30000)
+    x[:5000] = 512100 + rng.uniform(0, 20.0, 5000)  # a denser patch
+    first = rng.random(len(x)) < 0.8
+    d = local_surface_density(x, y, first, radius_m=20.0)
+    bx, by = np.floor(np.floor(x) / 5), np.floor(np.floor(y) / 5)
+    for i in rng.choice(len(x), 25, replace=False):
+        win = (np.abs(bx - bx[i]) <= 4) & (np.abs(by - by[i]) <= 4)
+        cells = len({(int(a), int(b)) for a, b in zip(np.floor(x[win]), np.floor(y[win]))})
+        assert d[i] == pytest.approx(first[win].sum() / cells, rel=1e-12)
+    piece = (x >= 512050) & (x < 512250)  # holds the windows of the points in its middle
+    mid = np.flatnonzero(piece & (x >= 512080) & (x < 512220))
+    d_piece = local_surface_density(x[piece], y[piece], first[piece], radius_m=20.0)
+    np.testing.assert_array_equal(d_piece[np.searchsorted(np.flatnonzero(piece), mid)], d[mid])
 
 
 def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():

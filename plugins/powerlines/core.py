@@ -23,37 +23,23 @@ from scipy.spatial import cKDTree
 from toolbox.neighbourhoods import neighbourhood_covariances, principal_axes, symmetric3_eigenvalues
 
 
-def occupied_cells(x, y, cell: float) -> int:
-    """How many ``cell``-sized squares hold a point (an occupancy grid: no sort of all points)."""
-    x0, y0 = np.floor(x.min() / cell), np.floor(y.min() / cell)
-    t = np.divide(x, cell)  # one scratch array, reused (this runs on every point of the survey)
-    t -= x0
-    c = t.astype(np.int64)
-    np.divide(y, cell, out=t)
-    t -= y0
-    r = t.astype(np.int64)
-    cols, rows = int(c.max()) + 1, int(r.max()) + 1
-    r *= cols
-    r += c
-    if rows * cols > 400_000_000:  # a sparse survey over a huge extent: count distinct cells instead
-        return len(np.unique(r))
-    occ = np.zeros(rows * cols, bool)
-    occ[r] = True
-    return int(np.count_nonzero(occ))
-
-
 MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense (mobile) scans
 
 
-def local_surface_density(x, y, weight=None, cell: float = 1.0, block_cells: int = 5,
-                          radius_blocks: int = 10) -> np.ndarray:
+DENSITY_BLOCK_M = 5.0  # the density's window moves in blocks of this size (cells of 1 m inside)
+
+
+def local_surface_density(x, y, weight=None, radius_m: float = 200.0, cell_m: float = 1.0,
+                          block_m: float = DENSITY_BLOCK_M) -> np.ndarray:
     """Per point: the points (``weight``: those that count, e.g. first returns) per occupied
-    ``cell`` x ``cell`` square in the window of (2 * ``radius_blocks`` + 1)^2 blocks of
-    ``block_cells`` cells around its block (about +-50 m at the defaults): the survey's surface
-    density as one run over a small file measures it, made local so that strips, overlaps and a
-    mobile scanner's falling range count where they are. Cells and blocks sit on multiples of
-    their size and every sum is an integer, so a point gets the same value in any piece of the
-    survey that holds its window: a tiled run decides as the whole does."""
+    ``cell_m`` square in the blocks of ``block_m`` within ``radius_m`` (rounded up to whole
+    blocks) of its block: the survey's surface density as one run over a small file measures it,
+    made local so that strips, overlaps and a mobile scanner's falling range count where they
+    are. Cells and blocks sit on multiples of their size and every sum is an integer, so a point
+    gets the same value in any piece of the survey that holds its window: a tiled run decides as
+    the whole does. Units: those of x, y."""
+    cell, block_cells = cell_m, int(round(block_m / cell_m))
+    radius_blocks = int(np.ceil(radius_m / block_m))
     n = len(x)
     if n == 0:
         return np.zeros(0)

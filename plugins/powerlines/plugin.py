@@ -54,9 +54,7 @@ def _run(inputs, params, ctx):
     # the density of the surfaces around each candidate: first returns per occupied square metre
     # within density_radius_m (roofs and crowns are that dense, wires are not)
     first = (rn == 1) if rn is not None and np.any(rn > 0) and params["first_returns_only"] else None
-    block_m = 5.0
-    density = local_surface_density(pc.x * hu, pc.y * hu, first, cell=1.0, block_cells=int(block_m),
-                                    radius_blocks=int(np.ceil(params["density_radius_m"] / block_m)))
+    density = local_surface_density(pc.x * hu, pc.y * hu, first, radius_m=params["density_radius_m"])
     surface_density = density[idx]
     linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
                                            params["planar_share"], surface_density)
@@ -162,7 +160,8 @@ def _run(inputs, params, ctx):
             "leave cell_size_m automatic or set it to a third of their spacing", len(th), len(keep), cell_used)
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
              "height_max_m_used": round(h_max, 2),
-             "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None, "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
+             "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
@@ -283,8 +282,10 @@ def _tile_buffer_m(p) -> float:
     grid, so it then votes as in the whole survey), and around each of its points what decides
     that point: the density window (density_radius_m and a block) and the ground filter's largest
     window at its defaults (50 m and a few cells)."""
+    from .core import DENSITY_BLOCK_M
+
     hough = p["tile_size_m"] if p["tile_size_m"] > 0 else 200.0
-    return hough + max(p["density_radius_m"] + 5.0, 60.0 if p["ground"] == "filter" else 0.0)
+    return hough + max(p["density_radius_m"] + DENSITY_BLOCK_M, 60.0 if p["ground"] == "filter" else 0.0)
 
 
 # how the layers of the tiles of a survey become one: lines cut at tile borders joined, the
