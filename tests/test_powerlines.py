@@ -294,6 +294,41 @@ def test_peel_separates_stacked_wires_and_leaves_crowns():
     assert peel_catenaries(crown[:, 0], crown[:, 1], crown[:, 2], 20, 8.0, 0.2, 5.0) == []
 
 
+def test_peel_finds_a_sparse_wire_over_a_crown():
+    """A mobile scan's sparse wire (clumps of points every few metres, gaps up to 7 m) over a
+    crown that holds nine points in ten of the band: uniform triples almost never hold three of
+    the wire's points; triples drawn along the line do, and the wire comes out with its points."""
+    rng = np.random.default_rng(5)
+    centres = np.cumsum(rng.uniform(2.0, 7.0, 14))  # clumps along 0-60 m
+    s_w = np.concatenate([c + rng.uniform(-0.3, 0.3, 4) for c in centres])
+    z_w = catenary(s_w, 10.0, 30.0, 600.0) + rng.normal(0, 0.02, len(s_w))
+    o_w = rng.normal(0, 0.03, len(s_w))
+    crown = rng.uniform([0, 5, -1], [centres.max(), 8.5, 1], (12 * len(s_w), 3))  # 1.5-5 m under the wire
+    s, z, off = np.r_[s_w, crown[:, 0]], np.r_[z_w, crown[:, 1]], np.r_[o_w, crown[:, 2]]
+    found = peel_catenaries(s, z, off, min_points=20, min_span=8.0, max_rms=0.2, gap_m=10.0)
+    assert len(found) == 1
+    idx, (z0, s0, c, rms) = found[0]
+    assert np.mean(idx < len(s_w)) >= 0.97 and np.sum(idx < len(s_w)) >= 0.9 * len(s_w)
+    assert rms <= 0.05
+
+
+def test_points_on_spans_take_what_lies_on_a_fitted_catenary():
+    from toolbox_plugins.powerlines.core import Span, points_on_spans
+
+    anchor, direction = np.array([100.0, 50.0]), np.array([0.6, 0.8])
+    sp = Span(0, 2, 0, 20.0, 500.0, 30.0, 0.0, 40.0, 0.03, 100, 0.4, 0.1, 0.0)  # offset 0.1 m
+    s = np.array([5.0, 20.0, 39.0, 20.0, 20.0, 45.0, 20.0])
+    off = np.array([0.1, 0.1, 0.1, 0.5, 0.1, 0.1, 0.1])
+    dz = np.array([0.0, 0.05, -0.1, 0.0, 0.3, 0.0, 0.12])
+    # on it; on it; on it; 0.4 m aside; 0.3 m above; past its end; 0.12 m above (within 0.15)
+    xy = anchor + s[:, None] * direction + off[:, None] * np.array([-direction[1], direction[0]])
+    z = catenary(s, 30.0, 20.0, 500.0) + dz
+    line_of, wire_of = points_on_spans([sp], [(anchor, direction, 0.0, 40.0)], xy[:, 0], xy[:, 1], z, 0.2)
+    assert line_of.tolist() == [0, 0, 0, -1, -1, -1, 0] and wire_of.tolist() == [2, 2, 2, -1, -1, -1, 2]
+    sp.rms = 0.5  # a span that is not a wire takes nothing
+    assert (points_on_spans([sp], [(anchor, direction, 0.0, 40.0)], xy[:, 0], xy[:, 1], z, 0.2)[0] == -1).all()
+
+
 def test_catenary_fit_minimises_the_soft_l1_cost_as_scipy_does():
     # the fit runs Levenberg-Marquardt on residuals transformed so that their squares sum to the
     # soft-L1 cost: on a span with outliers (an insulator, birds) it must land where scipy's
@@ -415,6 +450,26 @@ def test_ribbons_are_wires_not_roofs():
     assert r[:600].all() and not r[630:].any()
 
 
+def test_a_ribbon_linked_to_a_crown_is_a_ribbon_where_it_runs_alone():
+    """The same ribbon with a crown grown into it at one place: the linked set is no ribbon as a
+    whole, but judged piece by piece along it every piece away from the crown is."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines.core import ribbons
+
+    rng = np.random.default_rng(4)
+    s = rng.uniform(0, 60, 3 * 200)
+    off = np.repeat([-0.6, 0.0, 0.6], 200) + rng.normal(0, 0.03, 600)
+    wires = np.column_stack([s, off, 11 + rng.normal(0, 0.03, 600)])
+    crown = rng.normal([45.0, 0.0, 10.5], [1.5, 1.5, 0.8], (400, 3))
+    xyz = np.r_[wires, crown]
+    dist, idx = cKDTree(xyz).query(xyz, k=12)
+    flat = np.ones(len(xyz), bool)
+    r = ribbons(xyz, idx, dist, flat, flat)
+    away = np.abs(s - 45.0) > 10.0
+    assert r[:600][away].all() and not r[600:].any()
+
+
 def test_ribbon_corridor_at_default_parameters(tmp_path):
     """The compact line (three phases 0.6 m apart at one height, 11 m up) crossed above by two
     conductors: every conductor found once, none false, and its wire points."""
@@ -427,7 +482,7 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.88
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.92
     assert rep["stats"]["n_pylons"] >= 10
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6  # line B over each phase: not averaged into one
@@ -453,7 +508,7 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
         assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.85
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.9
 
 
 def test_corridor_variants_have_their_geometry():
@@ -483,8 +538,8 @@ def test_corridor_variants_have_their_geometry():
 
 
 @pytest.mark.parametrize("variant, extra, min_recall", [
-    ("stacked", {}, 0.95),  # three phases 5 m above one another on each side
-    ("distribution", {"slope_pct": 25.0}, 0.85),  # a 25 % hillside, trees under and beside the wires
+    ("stacked", {}, 0.97),  # three phases 5 m above one another on each side
+    ("distribution", {"slope_pct": 25.0}, 0.9),  # a 25 % hillside, trees under and beside the wires
 ])
 def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp_path):
     path = tmp_path / "v.laz"
@@ -540,7 +595,7 @@ def test_wire_points_on_synthetic_truth(corridor_result, corridor):
     t = laspy.read(corridor).classification == 14
     p = laspy.read(wires).classification == 14
     precision, recall = (t & p).sum() / p.sum(), (t & p).sum() / t.sum()
-    assert precision >= 0.98 and recall >= 0.9
+    assert precision >= 0.98 and recall >= 0.96
 
 
 def _ahn4_real(name, tmp_path):
@@ -552,7 +607,7 @@ def _ahn4_real(name, tmp_path):
     return tmp_path / f"{name}.laz", sub
 
 
-@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.97), ("12AN2_20", 0.92)])
+@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.97), ("12AN2_20", 0.94)])
 def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (12AN2_20's
     sparse earth wires on top are the misses left: see the issue notes), and the tile's one tower
@@ -578,14 +633,15 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
 def test_mobile_scan_stacked_wires_at_default_parameters(tmp_path):
     """Oakland part3_an (a car-mounted scanner under a distribution line, wires 0.3-1 m above one
     another), no setting: wire points against the CMU wire labels (class 14). A floor under what
-    the 3D step's catenary peel reaches (P 0.949 / R 0.545; before it R 0.306), not the issue's
-    0.90: the 2D Hough still misses the line's last 40 m past a bend (see the issue notes)."""
+    the 3D step reaches (P 0.957 / R 0.622; R 0.306 before the catenary peel, 0.545 before its
+    sampling along the line and the search of what pieces leave), not the issue's 0.90: the 2D
+    Hough still misses the line's last 40 m past a bend (see the issue notes)."""
     path = shared_file("oakland_mls/oakland_part3_an.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14
     pred = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
-    assert precision >= 0.9 and recall >= 0.5, (precision, recall)
+    assert precision >= 0.9 and recall >= 0.58, (precision, recall)
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):
@@ -744,8 +800,8 @@ def test_surface_density_rule_counts_the_points_within_one_metre(density):
     t = np.linspace(0, 30, 200)
     wire = np.column_stack([t, 25 + 0 * t, 8 + 0.001 * (t - 15) ** 2])
     xyz = np.vstack([roof, crown, sparse_roof, wire])
-    _, plain_planar, plain_rugged = shape_classes(xyz)
-    _, planar, rugged = shape_classes(xyz, surface_density=density)
+    _, plain_planar, plain_rugged, _ = shape_classes(xyz)
+    _, planar, rugged, _ = shape_classes(xyz, surface_density=density)
     counts = cKDTree(xyz).query_ball_point(xyz, 1.0, return_length=True)
     dense = counts >= 0.5 * np.pi * density
     assert np.array_equal(planar, plain_planar & dense) and np.array_equal(rugged, plain_rugged & dense)

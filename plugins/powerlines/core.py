@@ -71,7 +71,9 @@ def local_surface_density(x, y, weight=None, radius_m: float = 200.0, cell_m: fl
 
 def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
                   surface_density: float | None = None, max_axis_slope: float = 0.7):
-    """(linear, planar, rugged) masks from the normalised eigenvalues of each k-neighbourhood.
+    """(linear, planar, rugged, steep) masks from the normalised eigenvalues of each
+    k-neighbourhood; steep: otherwise linear along a steep axis (poles, tower legs, and wire
+    points whose neighbourhood leans on a pole top).
 
     Roofs and crowns are surfaces *as dense as the survey's*: with ``surface_density`` (points per
     square unit, one value or one per point: ``local_surface_density``) a planar or rugged
@@ -124,7 +126,9 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
     li = np.flatnonzero(linear)
     axis_z = np.abs(principal_axes(cov[li], ev[li, 2])[:, 2])
-    linear[li[axis_z > max_axis_slope / np.hypot(1.0, max_axis_slope)]] = False
+    steep = np.zeros(n, bool)
+    steep[li[axis_z > max_axis_slope / np.hypot(1.0, max_axis_slope)]] = True
+    linear &= ~steep
     # edges of roofs (and of crowns) are locally linear: a wire never touches a surface (a surface
     # point closer than ``reach``). The k-neighbourhoods answer it wherever the k-th neighbour is
     # at least that far (every closer point is among them); a search for the rest only
@@ -137,11 +141,11 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
                 d, _ = cKDTree(xyz[surface]).query(xyz[li[open_]], k=1, distance_upper_bound=reach, workers=-1)
                 touches[open_] = np.isfinite(d)
             linear[li[touches]] = False
-    return linear, planar, rugged
+    return linear, planar, rugged, steep & ~planar & ~rugged
 
 
 def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.05, max_band_m: float = 0.4,
-            min_points: int = 20, floor_share: float = 0.05):
+            min_points: int = 20, floor_share: float = 0.05, piece_m: float = 10.0):
     """Planar points that belong to a ribbon of wires side by side (a compact line's phases, a
     bundle): locally flat like a roof, but the set they form (with the ``smooth`` points linked
     to them within ``link``, through the k-neighbourhoods ``idx``/``dist``), projected across its
@@ -157,20 +161,36 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
     out = np.zeros(n, bool)
     lab = np.where(smooth, lab, -1)
     for k in np.unique(lab[planar]):
-        m = np.flatnonzero(lab == k)
-        if len(m) < min_points:
+        comp = np.flatnonzero(lab == k)
+        if len(comp) < min_points:
             continue
-        p = xyz[m, :2] - xyz[m, :2].mean(axis=0)
+        if _is_ribbon(xyz[comp, :2], bin_m, max_band_m, floor_share):
+            out[comp] = True
+            continue
+        # a ribbon linked to a crown or to a crossing line is a ribbon where it runs alone:
+        # the set judged again piece by piece along its main axis
+        p = xyz[comp, :2] - xyz[comp, :2].mean(axis=0)
         _, _, vt = np.linalg.svd(p, full_matrices=False)
-        across = p @ vt[1]
-        counts = np.bincount(((across - across.min()) / bin_m).astype(np.int64))
-        full = counts >= floor_share * counts.max()
-        # runs of full bins: their widths, and whether there are at least two
-        edges = np.flatnonzero(np.diff(np.r_[0, full.astype(np.int8), 0]))
-        widths = (edges[1::2] - edges[::2]) * bin_m
-        if len(widths) >= 2 and widths.max() <= max_band_m:
-            out[m] = True
+        along = p @ vt[0]
+        piece = ((along - along.min()) / piece_m).astype(np.int64)
+        for m in np.split(comp[np.argsort(piece, kind="stable")], np.cumsum(np.bincount(piece))[:-1]):
+            if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m, :2], bin_m, max_band_m, floor_share):
+                out[m] = True
     return out & planar
+
+
+def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
+    """Points that, across their main axis in plan, fall into two or more bands no wider than
+    ``max_band_m`` with empty bins (under ``floor_share`` of the fullest) between them."""
+    q = xy - xy.mean(axis=0)
+    _, _, vq = np.linalg.svd(q, full_matrices=False)
+    across = q @ vq[1]
+    counts = np.bincount(((across - across.min()) / bin_m).astype(np.int64))
+    full = counts >= floor_share * counts.max()
+    # runs of full bins: their widths, and whether there are at least two
+    edges = np.flatnonzero(np.diff(np.r_[0, full.astype(np.int8), 0]))
+    widths = (edges[1::2] - edges[::2]) * bin_m
+    return len(widths) >= 2 and widths.max() <= max_band_m
 
 
 @dataclass
@@ -421,14 +441,9 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             n_spans = [0]
 
             def emit(sel, wire, fit):
-                z0, s0, c, rms = fit
-                a, b = float(sk[sel].min()), float(sk[sel].max())
-                ss = np.linspace(a, b, 200)
-                chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
-                sag = float(np.max(chord - catenary(ss, z0, s0, c)))
-                o1, o0 = line_fit(sk[sel], ok_[sel]) if len(sk[sel]) >= 3 else (0.0, float(np.median(ok_[sel])))
-                spans.append(Span(li, wire, n_spans[0], s0, c, z0, a, b, rms, len(sk[sel]), sag, float(o0), float(o1)))
+                spans.append(_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit))
                 n_spans[0] += 1
+                z0, s0, c, rms = fit
                 if rms <= max_rms:  # points of a span that is not a wire are not wire points
                     resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
                     on = ik[sel][resid <= max(3 * rms, 0.15)]
@@ -469,13 +484,37 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                         pieces = list(zip(edges[:-1], edges[1:])) + pieces
                         continue
                 emit(np.flatnonzero(sel), wire, fit)
-        _pick_up(li, [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms], cand, s, z, off,
-                 line_of, wire_of_point)
+        good = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
+        free = np.flatnonzero(line_of[cand] < 0)
+        if good and peel and len(free) >= min_points:
+            # a line that holds a wire: what its pieces left (the sparse stretches of a mobile
+            # scan, a wire linked to clutter under it) searched for catenaries as a whole, across
+            # gaps twice the link's (occlusions)
+            for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
+                                             gap_m=2 * s_link):
+                sel = free[part]
+                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit))
+                line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
+                next_wire += 1
+                good.append(spans[-1])
+        _pick_up(li, good, cand, s, z, off, line_of, wire_of_point)
     return spans, line_of, wire_of_point
 
 
+def _span(line: int, wire: int, number: int, s, off, fit) -> Span:
+    """The Span of a catenary ``fit`` (z0, s0, c, rms) to points at ``s`` along the line and
+    ``off`` across it: its extent, sag below the chord and plan position (a straight trend)."""
+    z0, s0, c, rms = fit
+    a, b = float(s.min()), float(s.max())
+    ss = np.linspace(a, b, 200)
+    chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
+    sag = float(np.max(chord - catenary(ss, z0, s0, c)))
+    o1, o0 = line_fit(s, off) if len(s) >= 3 else (0.0, float(np.median(off)))
+    return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1))
+
+
 def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float, gap_m: float, tol_m: float = 0.1,
-                    lateral_tol_m: float = 0.15, max_slope: float = 0.5, n_samples: int = 400, max_tries: int = 8,
+                    lateral_tol_m: float = 0.15, max_slope: float = 0.5, n_samples: int = 2000, max_tries: int = 32,
                     seed: int = 0):
     """Catenaries in a piece of (along-line, height) points that no single one fits, strongest
     first: a parabola through three points (a catenary's first-order form) with the most points
@@ -492,6 +531,7 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
     while len(left) >= min_points:
         ls, lz, lo_ = s[left], z[left], off[left]
         tri = np.sort(rng.integers(0, len(left), (n_samples, 3)), axis=1)
+        tri[n_samples // 2:] = _local_triples(ls, lz, n_samples - n_samples // 2, min_span, max_slope, rng)
         s1, s2, s3 = (ls[tri[:, i]] for i in range(3))
         z1, z2, z3 = (lz[tri[:, i]] for i in range(3))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -499,8 +539,8 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
             a2 = (d23 - d12) / (s3 - s1)
             a1 = d12 - a2 * (s1 + s2)
             a0 = z1 - a1 * s1 - a2 * s1 * s1
-            lo, hi = float(ls.min()), float(ls.max())
-            # a wire hangs (curvature >= 0, a little slack for noise) and gently over the piece
+            # a wire hangs (curvature >= 0, a little slack for noise) and gently around its points
+            lo, hi = np.maximum(s1 - min_span, ls.min()), np.minimum(s3 + min_span, ls.max())
             ok = np.isfinite(a0) & (s3 - s1 >= min_span / 2) & (a2 >= -1e-3) & \
                 (np.abs(2 * a2 * lo + a1) <= max_slope) & (np.abs(2 * a2 * hi + a1) <= max_slope)
         if not ok.any():
@@ -512,10 +552,30 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
             pred = (a2[:, None] * ls[None, b] + a1[:, None]) * ls[None, b] + a0[:, None]
             votes += np.count_nonzero(np.abs(pred - lz[None, b]) <= tol_m, axis=1)
         hit = None
-        for best in np.argsort(-votes, kind="stable")[:max_tries]:
-            if votes[best] < min_points:
+        rejected = np.zeros(len(ls), bool)  # inliers of hypotheses already turned down
+        tries = 0
+        for best in np.argsort(-votes, kind="stable"):
+            if votes[best] < min_points or tries >= max_tries:
                 break
             inl = np.flatnonzero(np.abs((a2[best] * ls + a1[best]) * ls + a0[best] - lz) <= tol_m)
+            # variants of a turned-down hypothesis (a flat band of clutter draws many samples)
+            # would use up the tries before a weaker wire is looked at
+            if rejected[inl].mean() > 0.5:
+                continue
+            tries += 1
+            rejected[inl] = True
+            # local optimisation: a parabola refitted to the longest run of inliers, recounted
+            # (three points a few metres apart leave the curvature loose; the run fixes it)
+            for _ in range(3):
+                order = inl[np.argsort(ls[inl])]
+                run = max(np.split(order, np.flatnonzero(np.diff(ls[order]) > gap_m) + 1), key=len)
+                if len(run) < 3 or np.ptp(ls[run]) < min_span / 2:
+                    break
+                c2, c1, c0 = np.polyfit(ls[run], lz[run], 2)
+                more = np.flatnonzero(np.abs((c2 * ls + c1) * ls + c0 - lz) <= tol_m)
+                if len(more) <= len(inl):
+                    break
+                inl = more
             # the longest run of them along the line (another wire's crossing or clutter elsewhere)
             order = inl[np.argsort(ls[inl])]
             run = max(np.split(order, np.flatnonzero(np.diff(ls[order]) > gap_m) + 1), key=len)
@@ -551,6 +611,39 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
     return found
 
 
+def _local_triples(s, z, n: int, min_span: float, max_slope: float, rng, draws: int = 8, chord_tol_m: float = 0.3):
+    """Point triples (indices) for catenary hypotheses drawn along the line: a first point, a
+    third min_span/2 to min_span further on that a wire could reach from it (slope ≤ max_slope),
+    a second between them near their chord. Where a wire is a few percent of a band's points
+    (a sparse wire over a tree), uniform triples almost never hold three of its points."""
+    order = np.argsort(s, kind="stable")
+    ss, zz = s[order], z[order]
+    i = rng.integers(0, len(s), n)
+    lo = np.searchsorted(ss, ss[i] + min_span / 2)
+    hi = np.searchsorted(ss, ss[i] + min_span)
+    width = hi - lo
+    k = lo[:, None] + (rng.random((n, draws)) * np.maximum(width, 1)[:, None]).astype(np.int64)
+    k = np.minimum(k, len(s) - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.abs(zz[k] - zz[i][:, None]) / (ss[k] - ss[i][:, None])
+    ok = (width[:, None] > 0) & (slope <= max_slope)
+    # the most level of the draws: a wire is, locally, and clutter around it mostly is not
+    k = k[np.arange(n), np.argmin(np.where(ok, slope, np.inf), axis=1)]
+    found = ok.any(axis=1)
+    j = i[:, None] + 1 + (rng.random((n, draws)) * np.maximum(k - i - 1, 1)[:, None]).astype(np.int64)
+    j = np.minimum(j, len(s) - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        chord = zz[i][:, None] + (zz[k] - zz[i])[:, None] * (ss[j] - ss[i][:, None]) / (ss[k] - ss[i])[:, None]
+    resid = np.abs(zz[j] - chord)
+    near = resid <= chord_tol_m
+    j = j[np.arange(n), np.argmin(np.where(near, resid, np.inf), axis=1)]
+    found &= near.any(axis=1) & (k > i + 1)
+    out = np.sort(order[np.column_stack([i, j, k])], axis=1)
+    # where no such triple exists, a uniform one
+    out[~found] = np.sort(rng.integers(0, len(s), ((~found).sum(), 3)), axis=1)
+    return out
+
+
 def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m: float = 0.5):
     """Points of a line's band not yet on a wire that lie on one of its fitted spans (within the
     span's extent, ``lateral_m`` of its plan position and its fit tolerance): pieces of a wire
@@ -569,6 +662,30 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
         best_r[better], best_w[better] = r[better], sp.wire
     got = best_w >= 0
     line_of[fi[got]], wire_of_point[fi[got]] = li, best_w[got]
+
+
+def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
+    """For points outside the 3D step (the candidates the shape test left out: a wire's points
+    next to a pole top, whose neighbourhood leans on the pole), the conductor and wire of the
+    fitted span each lies on (within its extent, ``lateral_m`` of its plan position and its fit
+    tolerance), else -1. ``lines`` as for conductors_3d."""
+    line_of = np.full(len(px), -1, np.int64)
+    wire_of = np.full(len(px), -1, np.int64)
+    best = np.full(len(px), np.inf)
+    for sp in spans:
+        if not sp.rms <= max_rms:
+            continue
+        anchor, direction, _, _ = lines[sp.conductor]
+        dx, dy = px - anchor[0], py - anchor[1]
+        s = dx * direction[0] + dy * direction[1]
+        near = np.flatnonzero((s >= sp.s_from) & (s <= sp.s_to))
+        off = -dx[near] * direction[1] + dy[near] * direction[0]
+        near = near[np.abs(off - (sp.offset + sp.offset_slope * s[near])) <= lateral_m]
+        r = np.abs(catenary(s[near], sp.z0, sp.s0, sp.c) - pz[near])
+        ok = (r <= max(3 * sp.rms, 0.15)) & (r < best[near])
+        hit = near[ok]
+        best[hit], line_of[hit], wire_of[hit] = r[ok], sp.conductor, sp.wire
+    return line_of, wire_of
 
 
 def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:
@@ -771,7 +888,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         mine = np.flatnonzero(np.isin(flat, cells))
         if len(mine) >= 4:
             xyz = np.column_stack([x[mine], y[mine], hag[mine]])
-            _, _, rugged = shape_classes(xyz - xyz.min(axis=0))
+            _, _, rugged, _ = shape_classes(xyz - xyz.min(axis=0))
             if rugged.mean() > max_rugged:
                 continue
         body = centres[cells[column[cells]]]

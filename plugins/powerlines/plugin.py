@@ -18,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import conductors_3d, local_surface_density, shape_classes
+    from .core import conductors_3d, local_surface_density, points_on_spans, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -56,7 +56,7 @@ def _run(inputs, params, ctx):
     first = (rn == 1) if rn is not None and np.any(rn > 0) and params["first_returns_only"] else None
     density = local_surface_density(pc.x * hu, pc.y * hu, first, radius_m=params["density_radius_m"])
     surface_density = density[idx]
-    linear, planar, rugged = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
+    linear, planar, rugged, steep = shape_classes(xyz - xyz.min(axis=0), params["neighbours"], params["rugged_share"],
                                            params["planar_share"], surface_density)
     keep = idx[linear]
     timings["candidates_s"] = time.perf_counter() - t
@@ -98,6 +98,15 @@ def _run(inputs, params, ctx):
     if params["validate_3d"]:
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
     timings["conductors_3d_s"] = time.perf_counter() - t
+
+    # candidates the shape test left out as steep that lie on a fitted span are its points too
+    # (next to a pole top a wire point's neighbourhood leans on the pole)
+    steep_idx = idx[steep]
+    steep_line, steep_wire = points_on_spans(spans, geo, pc.x[steep_idx] * hu, pc.y[steep_idx] * hu,
+                                             pc.z[steep_idx] * vu, params["max_rms_3d_m"])
+    on = steep_line >= 0
+    keep = np.r_[keep, steep_idx[on]]
+    line_of, wire_of_pt = np.r_[line_of, steep_line[on]], np.r_[wire_of_pt, steep_wire[on]]
 
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
     # footprint is one of its arms, not a conductor
@@ -151,14 +160,14 @@ def _run(inputs, params, ctx):
         cls[tower_pt] = 15
         cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
-    if len(cond) == 0 and len(keep) >= 200 and len(th) < 0.15 * len(keep):
+    if len(cond) == 0 and linear.sum() >= 200 and len(th) < 0.15 * linear.sum():
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
         # opening keeps, and the top-hat throws the wires away
         ctx.log.warning(
             "powerlines: the top-hat kept %d of %d wire-like points and no conductor was found; conductors "
             "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
-            "leave cell_size_m automatic or set it to a third of their spacing", len(th), len(keep), cell_used)
-    stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(len(keep)), "n_tophat": len(th),
+            "leave cell_size_m automatic or set it to a third of their spacing", len(th), int(linear.sum()), cell_used)
+    stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": len(th),
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
