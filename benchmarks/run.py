@@ -438,7 +438,15 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
                 ("distribution", "distribution", {"line_variant": "distribution"}),
                 ("slope25", "double circuit, 25 % slope", {"slope_pct": 25.0}),
                 ("span400", "double circuit, 400 m spans", {"span_m": 400.0, "width_m": 1000.0}),
-                ("span60", "double circuit, 60 m spans", {"span_m": 60.0})]
+                ("span60", "double circuit, 60 m spans", {"span_m": 60.0}),
+                # a car-mounted scanner 2 m over a road 6 m (12 m) beside line A, density falling with range
+                ("mobile_dist", "distribution, mobile scan", {"line_variant": "distribution", "scanner": "mobile",
+                                                              "density_ppm2": 200.0, "width_m": 300.0, "height_m": 120.0}),
+                ("mobile_dist_far", "distribution, mobile scan 12 m aside",
+                 {"line_variant": "distribution", "scanner": "mobile", "density_ppm2": 100.0, "width_m": 300.0,
+                  "height_m": 120.0, "track_offset_m": 12.0}),
+                ("mobile_dc", "double circuit, mobile scan", {"scanner": "mobile", "density_ppm2": 200.0,
+                                                              "width_m": 300.0, "height_m": 120.0})]
     if quick:
         variants = variants[:1]
     for stem, label, kw in variants:

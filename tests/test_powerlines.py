@@ -537,6 +537,33 @@ def test_corridor_variants_have_their_geometry():
         assert np.min(c[:, 2] - long_.terrain.height(c[:, 0] - ox, c[:, 1] - oy)) >= 0.5 * 17.5 - 0.2
 
 
+def test_mobile_scanner_scene_thins_with_range():
+    """scanner=mobile: a track 2 m over the ground beside line A; points kept with probability
+    min(1, (10 m / range)^2): the density within 10 m of the scanner is the one asked for, at
+    30 m a ninth of it, and the wires overhead keep their points near the track."""
+    from toolbox.synthetic.scene import make_scene
+
+    sc = make_scene("corridor", 2, density_ppm2=100.0, width_m=200.0, height_m=120.0, line_variant="distribution",
+                    scanner="mobile")
+    (x0, y0), (x1, y1) = sc.truth["scanner"]["track"]
+    d = np.array([x1 - x0, y1 - y0]) / np.hypot(x1 - x0, y1 - y0)
+    lateral = np.abs((sc.x - x0) * -d[1] + (sc.y - y0) * d[0])
+    first = sc.fields["return_number"] == 1  # one per pulse
+
+    def density(lo, hi):  # pulses per m² in a band beside the track, its middle 80 % along the scene
+        along = (sc.x - x0) * d[0] + (sc.y - y0) * d[1]
+        m = first & (lateral >= lo) & (lateral < hi)
+        a = along[m]
+        return np.sum((a > np.percentile(a, 10)) & (a < np.percentile(a, 90))) / (0.8 * np.ptp(a) * 2 * (hi - lo))
+    near, far = density(0.0, 5.0), density(29.0, 31.0)
+    assert near == pytest.approx(100.0, rel=0.15)
+    assert far == pytest.approx(100.0 * (10.0 / np.hypot(30.0, 2.0)) ** 2, rel=0.25)
+    spans = [s for s in sc.truth["spans"] if s["line"] == "A"]
+    assert all(s["n_points"] > 0 for s in spans)
+    with pytest.raises(ValueError, match="mobile"):
+        make_scene("terrain", 1, scanner="mobile")
+
+
 @pytest.mark.parametrize("variant, extra, min_recall", [
     ("stacked", {}, 0.97),  # three phases 5 m above one another on each side
     ("distribution", {"slope_pct": 25.0}, 0.9),  # a 25 % hillside, trees under and beside the wires

@@ -31,6 +31,8 @@ def _run(inputs, params, ctx):
             f"synthetic-scene: {W:g} x {H:g} m at {params['density_ppm2']:g} pts/m2 would be about "
             f"{expected / 1e6:.0f} million points (limit {MAX_POINTS / 1e6:.0f} million); lower density_ppm2 or the extent"
         )
+    if params["scanner"] == "mobile" and params["kind"] != "corridor":
+        raise UsageError(f"synthetic-scene: scanner=mobile needs kind=corridor (got {params['kind']!r})")
     crs = parse_crs(params["crs"])
     if not crs.is_projected:
         raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
@@ -38,7 +40,8 @@ def _run(inputs, params, ctx):
                        params["dtm_resolution_m"], (params["origin_x"], params["origin_y"]), params["crs"],
                        line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"],
                        bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"],
-                       roof_set=params["roof_set"], span_m=params["span_m"], slope_pct=params["slope_pct"])
+                       roof_set=params["roof_set"], span_m=params["span_m"], slope_pct=params["slope_pct"],
+                       scanner=params["scanner"], track_offset_m=params["track_offset_m"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -96,6 +99,12 @@ def toolbox_algorithms():
                       unit="m", minimum=30.0, maximum=1000.0, allow_auto=True),
             Parameter("slope_pct", float, 0.0, "the ground rises eastwards (along the lines) by this much "
                       "(a corridor on a hillside)", unit="%", minimum=-60.0, maximum=60.0),
+            Parameter("scanner", str, "airborne", "corridor: airborne (uniform density), or mobile: a car-mounted "
+                      "scanner 2 m over a road beside line A, every point kept with probability min(1, (10 m / "
+                      "range)^2) - wires seen from below, density falling with range; give it a high density_ppm2 "
+                      "(the density within 10 m of the scanner)", choices=("airborne", "mobile")),
+            Parameter("track_offset_m", float, 6.0, "mobile: the road's distance beside line A", unit="m",
+                      minimum=-100.0, maximum=100.0),
             Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
                       minimum=0.2, maximum=3.0),
             Parameter("bundle", int, 2, "double-circuit: sub-conductors per phase (1; 2 side by side; 3 a "

@@ -80,13 +80,15 @@ class _Points:
 
 
 LINE_VARIANTS = ("double-circuit", "stacked", "ribbon", "distribution")
+SCANNERS = ("airborne", "mobile")
 
 
 def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0, noise_m: float = 0.03,
                width_m: float | None = None, height_m: float | None = None, dtm_resolution_m: float = 1.0,
                origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
                phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6,
-               roof_set: str = "basic", span_m: float | None = None, slope_pct: float = 0.0) -> Scene:
+               roof_set: str = "basic", span_m: float | None = None, slope_pct: float = 0.0,
+               scanner: str = "airborne", track_offset_m: float = 6.0, full_density_range_m: float = 10.0) -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
     if roof_set not in ROOF_SETS:
@@ -102,6 +104,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
                    "conductor_lines_2d": [], "crossings": [], "water": None, "bridge": None}
     if line_variant not in LINE_VARIANTS:
         raise ValueError(f"line_variant must be one of {LINE_VARIANTS}")
+    if scanner not in SCANNERS or (scanner == "mobile" and kind != "corridor"):
+        raise ValueError(f"scanner must be one of {SCANNERS} (mobile: corridor scenes only)")
     if kind != "corridor":
         lines = []
     elif line_variant == "ribbon":
@@ -230,6 +234,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     pts.add(hu, hv, terrain.height(hu, hv) + rng.uniform(45.0, 90.0, n_high), NOISE, 1, 1, _gps_time(hu, hv, H), intensity=30)
 
     allp = pts.concat()
+    if scanner == "mobile":
+        allp = _mobile_thinning(allp, lines[0], terrain, rng, track_offset_m, full_density_range_m)
     order = np.lexsort((allp["ret"], allp["pulse"]))  # acquisition order: by pulse, then return
     allp = {k: val[order] for k, val in allp.items()}
     ox, oy = origin
@@ -287,6 +293,13 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         truth["bridge"] = {"axis": [[e.p0[0] + ox, e.p0[1] + oy], [e.p1[0] + ox, e.p1[1] + oy]],
                            "opening_at_m": e.bridge_at, "height_m": e.height_m}
     _crossings(truth)
+    if scanner == "mobile":  # what the thinning left of each span
+        for sp in truth["spans"]:
+            a, b = np.asarray(sp["a"][:2]) - origin, np.asarray(sp["b"][:2]) - origin
+            t = ((allp["u"] - a[0]) * (b - a)[0] + (allp["v"] - a[1]) * (b - a)[1]) / max(sp["length_m"], 1e-9) ** 2
+            sp["n_points"] = int(np.sum((allp["obj"] == sp["wire_id"]) & (t >= 0) & (t < 1)))
+        truth["scanner"] = {"kind": "mobile", "track": _track(lines[0], track_offset_m, origin),
+                            "height_over_ground_m": MOBILE_TRACK_HEIGHT_M, "full_density_range_m": full_density_range_m}
     u_all, v_all = allp["u"], allp["v"]
     cls_all = allp["cls"]
     vals, counts = np.unique(cls_all, return_counts=True)
@@ -295,6 +308,35 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     truth["n_pulses"] = int(n_pulses)
     return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
                  dtm_resolution_m, truth, terrain)
+
+
+MOBILE_TRACK_HEIGHT_M = 2.0  # a car-mounted scanner's head over the road
+
+
+def _track(line, offset_m, origin=(0.0, 0.0)):
+    """The scanner's track in plan: along line A, ``offset_m`` to its side (a road beside it)."""
+    d = np.asarray(line["dir"], float)
+    across = np.array([-d[1], d[0]])
+    t0 = np.asarray(line["towers"][0], float)
+    return [(t0 + across * offset_m - d * 1e4 + origin).tolist(), (t0 + across * offset_m + d * 1e4 + origin).tolist()]
+
+
+def _mobile_thinning(allp, line, terrain, rng, offset_m, full_range_m):
+    """A car-mounted scanner driving beside line A: each point is kept with probability
+    min(1, (full_range_m / r)^2), r its range from the scanner head (2 m over the ground under the
+    track), as the density of a profile scanner falls with range; so wires overhead are seen from
+    below, dense near the road, and roofs and crowns further off thin out."""
+    d = np.asarray(line["dir"], float)
+    across = np.array([-d[1], d[0]])
+    t0 = np.asarray(line["towers"][0], float) + across * offset_m
+    du, dv = allp["u"] - t0[0], allp["v"] - t0[1]
+    along = du * d[0] + dv * d[1]
+    lateral = du * across[0] + dv * across[1]
+    foot = t0[None, :] + along[:, None] * d[None, :]
+    head = terrain.height(foot[:, 0], foot[:, 1]) + MOBILE_TRACK_HEIGHT_M
+    r = np.hypot(lateral, allp["z"] - head)
+    keep = rng.uniform(0, 1, len(r)) < np.minimum(1.0, (full_range_m / np.maximum(r, 1e-3)) ** 2)
+    return {k: v[keep] for k, v in allp.items()}
 
 
 def _gps_time(u, v, H):
