@@ -567,8 +567,7 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
             # local optimisation: a parabola refitted to the longest run of inliers, recounted
             # (three points a few metres apart leave the curvature loose; the run fixes it)
             for _ in range(3):
-                order = inl[np.argsort(ls[inl])]
-                run = max(np.split(order, np.flatnonzero(np.diff(ls[order]) > gap_m) + 1), key=len)
+                run = _longest_run(ls, inl, gap_m)
                 if len(run) < 3 or np.ptp(ls[run]) < min_span / 2:
                     break
                 c2, c1, c0 = np.polyfit(ls[run], lz[run], 2)
@@ -577,8 +576,7 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
                     break
                 inl = more
             # the longest run of them along the line (another wire's crossing or clutter elsewhere)
-            order = inl[np.argsort(ls[inl])]
-            run = max(np.split(order, np.flatnonzero(np.diff(ls[order]) > gap_m) + 1), key=len)
+            run = _longest_run(ls, inl, gap_m)
             if len(run) < min_points or np.ptp(ls[run]) < min_span:
                 continue
             # a wire is thin across the line too (points of crowns lined up in (s, z) are not):
@@ -609,6 +607,12 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
         found.append((left[on], hit[1]))
         left = left[~on]
     return found
+
+
+def _longest_run(s, idx, gap_m: float) -> np.ndarray:
+    """The longest run of the points ``idx`` along ``s`` without a gap over ``gap_m``."""
+    order = idx[np.argsort(s[idx])]
+    return max(np.split(order, np.flatnonzero(np.diff(s[order]) > gap_m) + 1), key=len)
 
 
 def _local_triples(s, z, n: int, min_span: float, max_slope: float, rng, draws: int = 8, chord_tol_m: float = 0.3):
@@ -651,17 +655,10 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
     free = line_of[cand] < 0
     if not line_spans or not free.any():
         return
-    fs, fz, fo, fi = s[free], z[free], off[free], cand[free]
-    best_r = np.full(len(fs), np.inf)
-    best_w = np.full(len(fs), -1)
-    for sp in line_spans:
-        inside = (fs >= sp.s_from - 0.5) & (fs <= sp.s_to + 0.5) & \
-                 (np.abs(fo - (sp.offset + sp.offset_slope * fs)) <= lateral_m)
-        r = np.where(inside, np.abs(catenary(fs, sp.z0, sp.s0, sp.c) - fz), np.inf)
-        better = (r <= max(3 * sp.rms, 0.15)) & (r < best_r)
-        best_r[better], best_w[better] = r[better], sp.wire
-    got = best_w >= 0
-    line_of[fi[got]], wire_of_point[fi[got]] = li, best_w[got]
+    _, k = _on_spans(s[free], off[free], z[free], line_spans, lateral_m, margin_m=0.5)
+    got = k >= 0
+    fi = cand[free][got]
+    line_of[fi], wire_of_point[fi] = li, [line_spans[j].wire for j in k[got]]
 
 
 def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
@@ -672,20 +669,32 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
-    for sp in spans:
-        if not sp.rms <= max_rms:
-            continue
-        anchor, direction, _, _ = lines[sp.conductor]
+    for li in sorted({sp.conductor for sp in spans if sp.rms <= max_rms}):
+        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
+        anchor, direction, _, _ = lines[li]
         dx, dy = px - anchor[0], py - anchor[1]
-        s = dx * direction[0] + dy * direction[1]
-        near = np.flatnonzero((s >= sp.s_from) & (s <= sp.s_to))
-        off = -dx[near] * direction[1] + dy[near] * direction[0]
-        near = near[np.abs(off - (sp.offset + sp.offset_slope * s[near])) <= lateral_m]
-        r = np.abs(catenary(s[near], sp.z0, sp.s0, sp.c) - pz[near])
-        ok = (r <= max(3 * sp.rms, 0.15)) & (r < best[near])
-        hit = near[ok]
-        best[hit], line_of[hit], wire_of[hit] = r[ok], sp.conductor, sp.wire
+        r, k = _on_spans(dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0], pz,
+                         line_spans, lateral_m, margin_m=0.0)
+        hit = np.flatnonzero((k >= 0) & (r < best))
+        best[hit], line_of[hit] = r[hit], li
+        wire_of[hit] = [line_spans[j].wire for j in k[hit]]
     return line_of, wire_of
+
+
+def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
+    """Per point (``s`` along a line, ``off`` across it, height ``z``): the residual to the
+    nearest of the line's ``spans`` it lies on - within the span's extent (± ``margin_m``),
+    ``lateral_m`` of its plan position and its fit tolerance (3 rms, at least 0.15) - and that
+    span's index in ``spans`` (-1: none)."""
+    best_r = np.full(len(s), np.inf)
+    best_k = np.full(len(s), -1)
+    for k, sp in enumerate(spans):
+        near = np.flatnonzero((s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m))
+        near = near[np.abs(off[near] - (sp.offset + sp.offset_slope * s[near])) <= lateral_m]
+        r = np.abs(catenary(s[near], sp.z0, sp.s0, sp.c) - z[near])
+        ok = (r <= max(3 * sp.rms, 0.15)) & (r < best_r[near])
+        best_r[near[ok]], best_k[near[ok]] = r[ok], k
+    return best_r, best_k
 
 
 def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:

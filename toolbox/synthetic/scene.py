@@ -313,12 +313,18 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
 MOBILE_TRACK_HEIGHT_M = 2.0  # a car-mounted scanner's head over the road
 
 
-def _track(line, offset_m, origin=(0.0, 0.0)):
-    """The scanner's track in plan: along line A, ``offset_m`` to its side (a road beside it)."""
+def _track_frame(line, offset_m):
+    """The scanner's track in plan: a point on it, its direction (line A's) and its left normal;
+    ``offset_m`` beside line A (a road along it)."""
     d = np.asarray(line["dir"], float)
     across = np.array([-d[1], d[0]])
-    t0 = np.asarray(line["towers"][0], float)
-    return [(t0 + across * offset_m - d * 1e4 + origin).tolist(), (t0 + across * offset_m + d * 1e4 + origin).tolist()]
+    return np.asarray(line["towers"][0], float) + across * offset_m, d, across
+
+
+def _track(line, offset_m, origin=(0.0, 0.0)):
+    """The track's ends (well past the scene) in world coordinates, for the truth."""
+    t0, d, _ = _track_frame(line, offset_m)
+    return [(t0 - d * 1e4 + origin).tolist(), (t0 + d * 1e4 + origin).tolist()]
 
 
 def _mobile_thinning(allp, line, terrain, rng, offset_m, full_range_m):
@@ -326,9 +332,7 @@ def _mobile_thinning(allp, line, terrain, rng, offset_m, full_range_m):
     min(1, (full_range_m / r)^2), r its range from the scanner head (2 m over the ground under the
     track), as the density of a profile scanner falls with range; so wires overhead are seen from
     below, dense near the road, and roofs and crowns further off thin out."""
-    d = np.asarray(line["dir"], float)
-    across = np.array([-d[1], d[0]])
-    t0 = np.asarray(line["towers"][0], float) + across * offset_m
+    t0, d, across = _track_frame(line, offset_m)
     du, dv = allp["u"] - t0[0], allp["v"] - t0[1]
     along = du * d[0] + dv * d[1]
     lateral = du * across[0] + dv * across[1]
