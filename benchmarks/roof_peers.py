@@ -24,6 +24,12 @@ def available() -> dict[str, str]:
         out["cgal"] = ""
     except Exception as exc:
         out["cgal"] = f"CGAL not importable ({exc.__class__.__name__}); pip install cgal"
+    try:
+        import whitebox_workflows  # noqa: F401
+
+        out["whitebox"] = ""
+    except Exception as exc:
+        out["whitebox"] = f"whitebox-workflows not importable ({exc.__class__.__name__}); pip install whitebox-workflows"
     return out
 
 
@@ -105,3 +111,49 @@ def cgal_region_growing(xyz, distance_m, min_points, normal_tol_deg, neighbours=
     region_growing(ps, pm, min_points=min_points, epsilon=distance_m,
                    normal_treshold=float(np.cos(np.radians(normal_tol_deg))), k=neighbours)
     return _labels(ps, pm, len(xyz))
+
+
+_WBE = None
+
+
+def whitebox_segmentation(xyz, distance_m, min_points, normal_tol_deg, radius_m=2.0):
+    """whitebox-workflows' `lidar_segmentation` (local RANSAC planes grown into segments whose
+    normals differ by at most ``normal_tol_deg``; segment ids come back as RGB). Its sibling
+    `lidar_ransac_planes` only tells planar from non-planar points, so it cannot be scored per
+    plane. Whitebox reads and writes files: the timing includes a small LAS round trip."""
+    import tempfile
+    from pathlib import Path
+
+    import laspy
+    import whitebox_workflows as wbw
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = Path(tmp) / "in.las", Path(tmp) / "out.las"
+        header = laspy.LasHeader(point_format=2, version="1.2")
+        header.scales = [0.001] * 3
+        header.offsets = xyz.min(axis=0)
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        las.write(src)
+        global _WBE
+        if _WBE is None:  # one environment for all calls, as a user's script would keep
+            _WBE = wbw.WbEnvironment()
+            _WBE.verbose = False
+        _WBE.lidar.lidar_segmentation(input=str(src), output=str(dst), search_radius=radius_m,
+                                     inlier_threshold=distance_m, acceptable_model_size=min_points,
+                                     norm_diff_threshold=normal_tol_deg, max_planar_slope=80.0)
+        out = laspy.read(dst)
+        # whitebox may reorder points: match them back by their coordinates
+        key_in = np.round((xyz - header.offsets) / 0.001).astype(np.int64)
+        key_out = np.column_stack([out.X, out.Y, out.Z]).astype(np.int64)
+        rgb = np.column_stack([out.red, out.green, out.blue]).astype(np.int64)
+    colour = (rgb[:, 0] << 32) | (rgb[:, 1] << 16) | rgb[:, 2]
+    _, seg = np.unique(colour, return_inverse=True)
+    seg = seg.astype(np.int32) + 1
+    counts = np.bincount(seg)
+    seg[counts[seg] < min_points] = 0  # segments smaller than the smallest plane are no plane
+    order_out = np.lexsort(key_out.T[::-1])
+    order_in = np.lexsort(key_in.T[::-1])
+    lab = np.zeros(len(xyz), np.int32)
+    lab[order_in] = seg[order_out]
+    return lab

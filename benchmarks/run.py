@@ -780,6 +780,7 @@ ROOF_PEERS = {  # name -> (needs, call); settings as ours where the peer has the
     # CGAL at its default normal threshold (0.9, 25.8 deg): at ours (10 deg) it scored lower
     "CGAL efficient_RANSAC": ("cgal", lambda q, st: roof_peers.cgal_ransac(q, 0.15, st["link_m_used"], 15, 25.84)),
     "CGAL region_growing": ("cgal", lambda q, st: roof_peers.cgal_region_growing(q, 0.15, 15, 25.84)),
+    "whitebox lidar_segmentation": ("whitebox", lambda q, st: roof_peers.whitebox_segmentation(q, 0.15, 15, 10.0)),
 }
 
 

@@ -169,11 +169,36 @@ def test_roof_lines_lie_on_both_truth_faces(roof_scene, tmp_path):
         if b["roof"] == "gable":
             assert list(mine.kind) == ["ridge"]
     assert len(lines) >= 10
-    for row in lines.itertuples():
+    for row in lines[lines.kind != "step"].itertuples():  # a step is a wall: its line is on the upper face only
         fa, fb = face_of(row.plane_a), face_of(row.plane_b)
         for xyz in np.asarray(row.geometry.coords):
             for f in (fa, fb):  # the truth plane n·p = offset, in the scene's world coordinates
                 assert abs(np.dot(f["normal"], xyz) - f["offset"]) < 0.15, (row, f["face"])
+
+
+def test_a_terrace_gives_a_step_line_along_the_upper_face(tmp_path):
+    """A flat roof 3 m over an adjacent flat roof (no intersection between them): one step line
+    along their shared wall at x = 10 m, at the upper face's height; a gable beside it only a ridge."""
+    import geopandas as gpd
+
+    rng = np.random.default_rng(2)
+    g = np.arange(0.15, 16, 0.3)
+    x, y = [a.ravel() for a in np.meshgrid(g, np.arange(0.15, 10, 0.3))]
+    z = np.where(x < 10, 6.0, 9.0)
+    gx, gy = [a.ravel() for a in np.meshgrid(np.arange(30.15, 40, 0.3), np.arange(0.15, 10, 0.3))]
+    gz = 8.0 - 0.6 * np.abs(gy - 5.0)  # a gable, ridge along x at y = 5
+    xyz = np.column_stack([np.r_[x, gx], np.r_[y, gy], np.r_[z, gz] + rng.normal(0, 0.03, len(x) + len(gx))])
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.header.scales, las.header.offsets = [0.001] * 3, [0, 0, 0]
+    las.x, las.y, las.z = xyz.T
+    las.write(tmp_path / "t.las")
+    rep = toolbox.run("roof-planes", tmp_path / "t.las", tmp_path / "t.gpkg", source="all", crs="EPSG:32632")
+    lines = gpd.read_file(tmp_path / "t.gpkg", layer="roof_lines")
+    assert rep["stats"]["n_planes"] == 4, rep["stats"]
+    assert sorted(lines.kind) == ["ridge", "step"], list(lines.kind)
+    step = np.asarray(lines[lines.kind == "step"].geometry.iloc[0].coords)
+    assert np.all(np.abs(step[:, 0] - 10.0) < 0.5) and np.ptp(step[:, 1]) > 8.0, step
+    assert np.all(np.abs(step[:, 2] - 9.0) < 0.1), step
 
 
 def _outline_ious(outlines, truth):

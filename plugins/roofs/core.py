@@ -272,7 +272,8 @@ def mean_spacing_xy(xy: np.ndarray) -> float:
 class RoofLine:
     start: np.ndarray  # 3D end points, in the coordinates of the points given
     end: np.ndarray
-    kind: str  # ridge (horizontal, convex), hip (sloped, convex), valley (concave), step (one face up, one down)
+    kind: str  # ridge (horizontal, convex), hip (sloped, convex), valley (concave), break (one face up, one
+    # down: a mansard's or gambrel's knee), step (a height jump: a wall between a face and a lower one)
     plane_a: int  # indices into the planes given
     plane_b: int
 
@@ -281,7 +282,7 @@ def roof_lines(xyz: np.ndarray, planes: list[Plane], link: float, min_angle_deg:
                horizontal_deg: float = 5.0) -> list[RoofLine]:
     """Intersections of adjacent faces (their points within ``link`` in plan), clipped to where
     both faces have points within ``link`` of the line. Kinds: a horizontal convex line is a ridge,
-    a sloped one a hip, a concave one a valley."""
+    a sloped one a hip, a concave one a valley, one face up and one down a break."""
     if len(planes) < 2:
         return []
     centre = xyz.mean(axis=0)
@@ -324,6 +325,60 @@ def roof_lines(xyz: np.ndarray, planes: list[Plane], link: float, min_angle_deg:
             elif not any(down):
                 kind = "valley"
             else:
-                kind = "step"
+                kind = "break"
             out.append(RoofLine(x0 + lo * u + centre, x0 + hi * u + centre, kind, a, b))
+    return out
+
+
+def step_edges(xyz: np.ndarray, planes: list[Plane], outlines: list, link: float, min_step: float,
+               skip_pairs=frozenset()) -> list[RoofLine]:
+    """Height jumps between adjacent faces that do not meet in a line (a flat roof beside a lower
+    one, the terraces of a stepped roof, a sawtooth's risers): the parts of the upper face's
+    outline (``outlines[i]``, a shapely polygon in plan) within ``link`` of the lower face's
+    points, where the upper face's border points stand at least ``min_step`` (median) over their
+    nearest neighbours on the lower one.
+    Pairs in ``skip_pairs`` (those with an intersection line) are left out. One RoofLine per
+    straight run of outline (the outline's vertices keep their z on the upper plane)."""
+    import shapely
+    from shapely.geometry import LineString, MultiPoint
+
+    if len(planes) < 2:
+        return []
+    trees = [cKDTree(xyz[pl.indices, :2]) for pl in planes]
+    out = []
+    for a in range(len(planes)):
+        for b in range(a + 1, len(planes)):
+            if (a, b) in skip_pairs:
+                continue
+            pa, pb = xyz[planes[a].indices], xyz[planes[b].indices]
+            dist_a, nn_a = trees[b].query(pa[:, :2], distance_upper_bound=link)
+            near_a = dist_a <= link
+            if near_a.sum() < 2:
+                continue
+            dist_b, nn_b = trees[a].query(pb[:, :2], distance_upper_bound=link)
+            near_b = dist_b <= link
+            # which face is up: each border point against its nearest neighbour on the other face
+            # (faces that meet at a corner or a hip have neighbours at their own height)
+            jump = np.median(np.r_[pa[near_a, 2] - pb[nn_a[near_a], 2], pa[nn_b[near_b], 2] - pb[near_b, 2]])
+            if abs(jump) < min_step:
+                continue
+            up, low_pts = (a, pb[near_b]) if jump > 0 else (b, pa[near_a])
+            if planes[up].normal[2] < 0.05:
+                continue  # a wall-like face: no outline in plan to speak of
+            border = outlines[up].exterior.intersection(MultiPoint(low_pts[:, :2]).buffer(link))
+            pieces = [g for g in getattr(border, "geoms", [border]) if isinstance(g, LineString) and not g.is_empty]
+            if not pieces:
+                continue
+            merged = shapely.line_merge(shapely.union_all(pieces))  # the ring's start may split a run in two
+            pieces = [shapely.simplify(g, 0.5 * link) for g in getattr(merged, "geoms", [merged])]
+            n, d = planes[up].normal, planes[up].d
+            for g in pieces:
+                if g.length < 2 * link:
+                    continue  # faces that touch at a corner only
+                c = np.asarray(g.coords)
+                for i in range(len(c) - 1):
+                    if np.hypot(*(c[i + 1] - c[i])) < link:
+                        continue
+                    ends = [np.r_[q, (d - q @ n[:2]) / n[2]] for q in (c[i], c[i + 1])]
+                    out.append(RoofLine(ends[0], ends[1], "step", up, b if up == a else a))
     return out

@@ -102,20 +102,27 @@ def _run(inputs, params, ctx):
         planes = core.detect_planes(xyz[g], angle, rho, params["max_distance_m"] / hu, min_points, link, voter,
                                     normal_tol_deg=params["normal_tol_deg"] or None, min_width=link)
         first_id = next_id
-        for ln in core.roof_lines(xyz[g], planes, link):
-            line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
-            line_rows.append({"kind": ln.kind, "building_id": int(b), "plane_a": first_id + ln.plane_a,
-                              "plane_b": first_id + ln.plane_b,
-                              "length_m": round(float(np.linalg.norm(ln.end - ln.start)) * hu, 3)})
+        hulls = []
         for pl in planes:
-            members = g[pl.indices]
-            plane_id[idx[members]] = next_id
-            pts = xyz[members]
+            pts = xyz[g[pl.indices]]
             hull = shapely.concave_hull(MultiPoint(pts[:, :2]), ratio=params["hull_ratio"])
             if not isinstance(hull, Polygon) or hull.is_empty:
                 hull = MultiPoint(pts[:, :2]).convex_hull
                 if not isinstance(hull, Polygon):
                     hull = hull.buffer(0.5 * spacing)
+            hulls.append(hull)
+        meets = core.roof_lines(xyz[g], planes, link)
+        steps = core.step_edges(xyz[g], planes, hulls, link, 2 * params["max_distance_m"] / hu,
+                                skip_pairs={(ln.plane_a, ln.plane_b) for ln in meets})
+        for ln in meets + steps:
+            line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
+            line_rows.append({"kind": ln.kind, "building_id": int(b), "plane_a": first_id + ln.plane_a,
+                              "plane_b": first_id + ln.plane_b,
+                              "length_m": round(float(np.linalg.norm(ln.end - ln.start)) * hu, 3)})
+        for pl, hull in zip(planes, hulls):
+            members = g[pl.indices]
+            plane_id[idx[members]] = next_id
+            pts = xyz[members]
             n = pl.normal
             ring = np.asarray(hull.exterior.coords)
             zr = (pl.d - ring[:, 0] * n[0] - ring[:, 1] * n[1]) / n[2] if n[2] > 0.05 else np.full(len(ring), pts[:, 2].mean())
@@ -142,7 +149,7 @@ def _run(inputs, params, ctx):
              "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
              "link_m_used": round(link * hu, 3), "accumulator_cells": len(reference.ball_cells(angle)),
              "seconds": round(time.perf_counter() - t0, 3)}
-    stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "step")}
+    stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "break", "step")}
     return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},
                           stats=stats)
 
@@ -304,7 +311,8 @@ def toolbox_algorithms():
             "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped. Roof points: the file's class 6 (source=classified), buildings found by "
             "classify (detect), or every point of the input (all); auto takes class 6 when the file has it. "
             "Where two adjacent faces meet, their intersection clipped to both is a roof line (ridge, hip, valley, "
-            "step). Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
+            "break); where a face stands over an adjacent lower one without meeting it, the part of its outline "
+            "along the lower one is a step line. Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
             "plane_id dimension (0: on no plane)."),
         reference=REFERENCE,
         parameters=[
@@ -331,7 +339,8 @@ def toolbox_algorithms():
         inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud (buildings as class 6, or one roof)")],
         outputs=[
             Output("planes", "vector", "layers roof_planes (one PolygonZ per face) and roof_lines (LineStringZ "
-                   "where adjacent faces meet: ridge, hip, valley or step)", style="roof_planes"),
+                   "where adjacent faces meet: ridge, hip, valley or break; step where a face stands over a "
+                   "lower one it does not meet)", style="roof_planes"),
             Output("classified", "points", "the input with plane_id (int32, 0 = on no plane)", suffix="_classified"),
         ],
     )]
