@@ -909,7 +909,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small inputs only")
     ap.add_argument("--no-10m", action="store_true",
                     help="skip the large synthetic inputs (the 10-million-point tile, the 3 km corridor)")
-    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey"),
+    ap.add_argument("--only", choices=("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey", "pylon"),
                     action="append",
                     help="run only these sections (repeatable); results.json then holds only them")
     args = ap.parse_args(argv)
@@ -925,7 +925,7 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey"))
+        want = set(args.only or ("ground", "isprs", "hillshade", "hough", "powerlines", "roofs", "survey", "pylon"))
         if "ground" in want:
             rows += bench_ground(tmp, not args.no_10m, args.quick)
         if "isprs" in want:
@@ -940,6 +940,10 @@ def main(argv=None) -> int:
             rows += bench_roofs(tmp, out_dir)
         if "survey" in want:
             rows += bench_survey(tmp, quick=args.quick or args.no_10m)
+        if "pylon" in want:
+            from pylon_bench import bench_pylon
+
+            rows += bench_pylon()
     check_end = machine_check()
     print_machine_check("end", check_end)
     rows.append({"case": "machine check", "start": check_start, "end": check_end})

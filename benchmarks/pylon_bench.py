@@ -1,0 +1,83 @@
+"""pylon-pose bench: the rendered similarity A_s, taichi kernel against its numpy reference on the
+same photo descriptor and the same candidate poses (a lattice tower of a few hundred beams, a
+2400 x 1600 photo from 120 m with the tower's segments and 1500 clutter segments, 8 px cells).
+Prints candidate poses scored per second by each, the ratio, and whether the scores agree."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def lattice_tower(height_m=30.0, base_m=8.0, top_m=2.0, panels=8, arm_m=8.0):
+    """Beams (ends A, B) of a square lattice tower with X bracing on every face and two cross arms."""
+    segs = []
+    zs = np.linspace(0.0, height_m * 0.75, panels + 1)
+    half = np.interp(zs, [0.0, zs[-1]], [base_m / 2, top_m / 2])
+    corners = [np.array([[sx * h, sy * h, z] for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]) for z, h in zip(zs, half)]
+    for lo, hi in zip(corners[:-1], corners[1:]):
+        for k in range(4):
+            j = (k + 1) % 4
+            segs += [(lo[k], hi[k]), (hi[k], hi[j]), (lo[k], hi[j]), (lo[j], hi[k])]
+    top = corners[-1]
+    for sx in (-1, 1):  # the arms
+        tip = np.array([sx * (top_m / 2 + arm_m), 0.0, zs[-1]])
+        segs += [(top[k], tip) for k in range(4)]
+    apex = np.array([0.0, 0.0, height_m])
+    segs += [(top[k], apex) for k in range(4)]
+    a = np.array([s[0] for s in segs], np.float32)
+    b = np.array([s[1] for s in segs], np.float32)
+    return a, b
+
+
+def bench_pylon(n_poses: int = 4096, n_reference: int = 128) -> list[dict]:
+    from toolbox.kernels import arch_used, taichi
+    from toolbox_plugins.pylon_pose import core, reference
+    from toolbox_plugins.pylon_pose.kernels import TaichiSimilarity
+
+    A, B = lattice_tower()
+    K = np.array([[2400.0, 0, 1200], [0, 2400, 800], [0, 0, 1]])
+    centre = np.array([40.0, -100.0, 70.0])
+    z = np.array([0.0, 0.0, 15.0]) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    R = np.vstack([x, np.cross(z, x), z])
+    t = -R @ centre
+    truth = core.pose_matrices(K, R, t, 0.0, 0.0, 0.0, 20.0)
+    ua, va, _ = reference.project_fixed(truth, A)
+    ub, vb, _ = reference.project_fixed(truth, B)
+    rng = np.random.default_rng(0)
+    start = rng.uniform(0, 1, (1500, 2)) * [2400, 1600]
+    ang = rng.uniform(0, np.pi, 1500)
+    length = rng.uniform(10, 80, 1500)
+    clutter = np.column_stack([start, start + np.column_stack([np.cos(ang), np.sin(ang)]) * length[:, None]])
+    photo = np.vstack([np.column_stack([ua[0], va[0], ub[0], vb[0]]) / reference.SUBPIXEL, clutter])
+    b, table = core.photo_descriptor(photo, (2400, 1600), cell_px=8)
+    P = core.pose_matrices(K, R, t, rng.normal(0, 1.5, n_poses), rng.normal(0, 1.5, n_poses),
+                           rng.normal(0, 0.5, n_poses), 20.0 + rng.normal(0, 3.0, n_poses),
+                           rng.normal(0, 0.2, n_poses), rng.normal(0, 0.2, n_poses))
+    kernel = TaichiSimilarity(taichi())
+    kernel(b, P[:8], A, B, 8, table)  # compile
+    t_ti = min(_timed(lambda: kernel(b, P, A, B, 8, table))[0] for _ in range(3))
+    got = kernel(b, P, A, B, 8, table)
+    t_np, ref = _timed(lambda: reference.similarity(b, P[:n_reference], A, B, 8, table))
+    rate_ti, rate_np = n_poses / t_ti, n_reference / t_np
+    equal = bool(np.array_equal(got[:n_reference], ref))
+    print(f"  similarity A_s, {len(A)} beams x {n_poses:,} poses on {arch_used()}: taichi {rate_ti:,.0f} poses/s "
+          f"({t_ti * 1e3:.1f} ms), numpy reference {rate_np:,.0f} poses/s ({n_reference} poses, {t_np:.2f} s): "
+          f"{rate_ti / rate_np:.0f}x; scores equal: {equal}", flush=True)
+    return [{"case": "pylon-pose similarity", "arch": arch_used(), "beams": len(A), "poses": n_poses,
+             "taichi_poses_per_s": rate_ti, "reference_poses_per_s": rate_np, "ratio": rate_ti / rate_np,
+             "equal": equal}]
+
+
+def _timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t, out
+
+
+if __name__ == "__main__":
+    bench_pylon()

@@ -1,0 +1,132 @@
+"""pylon-pose building blocks: the host's COLMAP camera reader and writer (round trip, bad input),
+the Brown distortion round trip, and the rendered similarity A_s: its taichi kernel equal to the
+numpy reference, its integer direction bins and cell walks, its direction smoothing, and the true
+pose scoring best."""
+
+import numpy as np
+import pytest
+
+from toolbox.errors import DataError
+from toolbox.io.cameras import Camera, Image, quaternion_from_matrix, read_colmap_text, write_colmap_text
+from toolbox_plugins.pylon_pose import core, reference
+
+
+def _look_at(centre, target):
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    R = np.vstack([x, np.cross(z, x), z])
+    return R, -R @ centre
+
+
+def test_colmap_text_round_trip(tmp_path):
+    R, t = _look_at(np.array([100.0, -20.0, 80.0]), [0.0, 0.0, 10.0])
+    cams = {1: Camera(1, "OPENCV", 2400, 1600, (2410.0, 2405.0, 1199.5, 801.0, -0.08, 0.02, 1e-4, -2e-4)),
+            2: Camera(2, "SIMPLE_RADIAL", 2000, 1500, (1900.0, 1000.0, 750.0, -0.05))}
+    imgs = {7: Image(7, "a photo.jpg", 1, quaternion_from_matrix(R), t), 8: Image(8, "b.jpg", 2, np.array([1.0, 0, 0, 0]),
+                                                                              np.zeros(3))}
+    write_colmap_text(tmp_path, cams, imgs)
+    # a points line with triples, as COLMAP writes them, must not be taken for a photo
+    text = (tmp_path / "images.txt").read_text().replace("a photo.jpg\n\n", "a photo.jpg\n12.5 30.25 -1 40.0 41.0 17\n")
+    (tmp_path / "images.txt").write_text(text)
+    c2, i2 = read_colmap_text(tmp_path)
+    assert set(i2) == {7, 8} and i2[7].name == "a photo.jpg"
+    np.testing.assert_allclose(i2[7].R, R, atol=1e-12)
+    np.testing.assert_allclose(i2[7].centre, [100.0, -20.0, 80.0], atol=1e-9)
+    np.testing.assert_allclose(i2[7].world_to_camera([0.0, 0.0, 10.0])[:2], 0.0, atol=1e-9)  # on the axis
+    assert c2[1].K[0, 0] == 2410.0 and c2[1].K[1, 1] == 2405.0
+    np.testing.assert_array_equal(c2[1].distortion, [-0.08, 0.02, 1e-4, -2e-4, 0.0])
+    np.testing.assert_array_equal(c2[2].distortion, [-0.05, 0, 0, 0, 0])
+
+
+def test_colmap_bad_input_says_which_file_and_line(tmp_path):
+    with pytest.raises(DataError, match="is not a folder"):
+        read_colmap_text(tmp_path / "nope")
+    (tmp_path / "cameras.txt").write_text("# c\n1 FISHEYE_X 100 100 1 2 3\n")
+    with pytest.raises(DataError, match=r"cameras.txt:2: camera model 'FISHEYE_X' is not supported"):
+        read_colmap_text(tmp_path)
+    (tmp_path / "cameras.txt").write_text("1 PINHOLE 100 100 1 2 3\n")
+    with pytest.raises(DataError, match="PINHOLE takes 4 parameters"):
+        read_colmap_text(tmp_path)
+    (tmp_path / "cameras.txt").write_text("1 PINHOLE 100 100 90 90 50 50\n")
+    with pytest.raises(DataError, match="has no images.txt"):
+        read_colmap_text(tmp_path)
+    (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 3 x.jpg\n\n")
+    with pytest.raises(DataError, match="uses camera 3, which cameras.txt lacks"):
+        read_colmap_text(tmp_path)
+
+
+def test_undistortion_inverts_the_brown_model():
+    cam = Camera(1, "OPENCV", 2400, 1600, (2400.0, 2400.0, 1200.0, 800.0, -0.12, 0.05, 3e-4, -2e-4))
+    rng = np.random.default_rng(1)
+    xyz = np.column_stack([rng.uniform(-0.45, 0.45, 200), rng.uniform(-0.3, 0.3, 200), np.ones(200)]) * 120.0
+    distorted = cam.project(xyz)
+    ideal = cam.project(xyz, distort=False)
+    assert np.abs(distorted - ideal).max() > 20.0  # the distortion is not negligible
+    np.testing.assert_allclose(cam.undistort_pixels(distorted), ideal, atol=0.01)
+
+
+def test_direction_bins_and_cell_walks_are_exact():
+    table = reference.direction_table(180)
+    rng = np.random.default_rng(2)
+    ang = rng.uniform(0, 360, 5000)
+    ang = ang[np.abs((ang % 1.0) - 0.5) < 0.45]  # away from a bin boundary
+    dx, dy = np.round(np.cos(np.radians(ang)) * 4000), np.round(np.sin(np.radians(ang)) * 4000)
+    expect = np.floor(np.degrees(np.arctan2(dy, dx)) % 180.0).astype(int)
+    got = reference.direction_bin(dx.astype(np.int64), dy.astype(np.int64), table)
+    np.testing.assert_array_equal(got, expect % 180)
+    for x0, y0, x1, y1 in rng.integers(-20, 20, (200, 4)):
+        cx, cy = reference.walk_cells(x0, y0, x1, y1)
+        assert (cx[0], cy[0], cx[-1], cy[-1]) == (x0, y0, x1, y1)
+        assert np.all(np.maximum(np.abs(np.diff(cx)), np.abs(np.diff(cy))) == 1) or len(cx) == 1  # 8-connected
+
+
+def test_direction_smoothing_max_and_sum():
+    w = core.direction_weights()
+    np.testing.assert_array_equal(w, [1, 4, 7, 4, 1])  # round(exp((4 - d^2) / 2))
+    a = np.zeros((1, 1, 180), np.uint8)
+    a[0, 0, [0, 3]] = 1
+    bmax = core.smooth_directions(a, w, "max")[0, 0]
+    bsum = core.smooth_directions(a, w, "sum")[0, 0]
+    assert list(bmax[[178, 179, 0, 1, 2, 3, 4]]) == [1, 4, 7, 4, 4, 7, 4]  # wraps past 0
+    assert list(bsum[[0, 1, 2, 3]]) == [7, 5, 5, 7]  # 4 + 1 from both sides
+
+
+def test_heading_turns_the_model_x_axis_counter_clockwise():
+    np.testing.assert_allclose(core.rotation(90.0, 0.0, 0.0) @ [1.0, 0, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(core.rotation(0.0, 0.0, 90.0) @ [0, 1.0, 0], [0, 0, 1], atol=1e-12)
+
+
+def _frame_model():
+    corners = np.array([[x, y, z] for z in (0, 10, 20) for x in (-2, 2) for y in (-2, 2)], float)
+    segs = [(a, b) for i, a in enumerate(corners) for b in corners[i + 1:]
+            if np.sum(a != b) <= 2 and np.linalg.norm(a - b) < 12]
+    return np.array([s[0] for s in segs], np.float32), np.array([s[1] for s in segs], np.float32)
+
+
+def test_taichi_similarity_equals_the_reference_and_the_true_pose_scores_best():
+    from toolbox.kernels import taichi
+    from toolbox_plugins.pylon_pose.kernels import TaichiSimilarity
+
+    A, B = _frame_model()
+    K = np.array([[2400.0, 0, 1200], [0, 2400, 800], [0, 0, 1]])
+    R, t = _look_at(np.array([0.0, -110.0, 60.0]), [0.0, 0.0, 10.0])
+    truth = core.pose_matrices(K, R, t, 0.0, 0.0, 0.0, 30.0)
+    ua, va, _ = reference.project_fixed(truth, A)
+    ub, vb, _ = reference.project_fixed(truth, B)
+    rng = np.random.default_rng(3)
+    photo = np.vstack([np.column_stack([ua[0], va[0], ub[0], vb[0]]) / reference.SUBPIXEL,
+                       rng.uniform(0, 1, (300, 4)) * [2400, 1600, 2400, 1600]])  # the model and clutter
+    b, table = core.photo_descriptor(photo, (2400, 1600), cell_px=8)
+    n = 400
+    x, y, z = rng.normal(0, 1.0, n), rng.normal(0, 1.0, n), rng.normal(0, 0.5, n)
+    h = 30.0 + rng.normal(0, 5.0, n)
+    x[0] = y[0] = z[0] = 0.0
+    h[0] = 30.0
+    x[1], z[1] = 1e4, -400.0  # behind the camera: scores nothing
+    P = core.pose_matrices(K, R, t, x, y, z, h)
+    ref = reference.similarity(b, P, A, B, 8, table)
+    got = TaichiSimilarity(taichi())(b, P, A, B, 8, table)
+    np.testing.assert_array_equal(got, ref)
+    assert ref[1] == 0 and np.argmax(ref) == 0 and ref[0] > 1.2 * np.sort(ref)[-2]
