@@ -66,9 +66,9 @@ def rotation(heading_deg, pitch_deg, roll_deg) -> np.ndarray:
 
 def pose_matrices(K: np.ndarray, R_cam: np.ndarray, t_cam: np.ndarray, x, y, z, heading_deg, pitch_deg=0.0,
                   roll_deg=0.0, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """P = K·[R|t]·M for each candidate pose (float32, (N, 3, 4)), M the pylon's model-to-world
+    """P = K·[R|t]·M for each candidate pose (float64, (N, 3, 4)), M the pylon's model-to-world
     transform. ``origin`` is subtracted from world coordinates first (the camera's t must be in the
-    same shifted frame): projected UTM coordinates in float32 would lose centimetres."""
+    same shifted frame), which keeps the numbers of a projected CRS small."""
     Rm = rotation(heading_deg, pitch_deg, roll_deg).reshape(-1, 3, 3)
     T = np.column_stack([np.broadcast_to(np.asarray(v, np.float64), (len(Rm),)) for v in (x, y, z)])
     T = T - np.asarray(origin, np.float64)
@@ -76,7 +76,7 @@ def pose_matrices(K: np.ndarray, R_cam: np.ndarray, t_cam: np.ndarray, x, y, z, 
     P = np.empty((len(Rm), 3, 4))
     P[:, :, :3] = A @ Rm
     P[:, :, 3] = (A @ T.T).T + K @ t_cam
-    return P.astype(np.float32)
+    return P
 
 
 def similarity(b: np.ndarray, table: np.ndarray, P: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray,

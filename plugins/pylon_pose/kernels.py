@@ -1,6 +1,6 @@
 """Taichi kernel of the rendered similarity A_s; ``reference.similarity`` is its numpy twin (the
 tests prove them equal). One thread per (candidate pose, model segment), as in the thesis's CUDA
-code: project both ends (float32, the reference's order), cut to fixed point, find the direction
+code: project both ends (float64, the reference's order), cut to fixed point, find the direction
 bin by integer cross products, walk the cells with integer Bresenham steps and add the photo
 descriptor of each cell inside the grid to the pose's score (an atomic add)."""
 
@@ -24,16 +24,16 @@ def _build(ti):
         return v + P[n, r, 3]
 
     @ti.kernel
-    def score(b: ti.types.ndarray(dtype=ti.i32, ndim=3), P: ti.types.ndarray(dtype=ti.f32, ndim=3),
-              seg: ti.types.ndarray(dtype=ti.f32, ndim=2), table: ti.types.ndarray(dtype=ti.i64, ndim=2),
+    def score(b: ti.types.ndarray(dtype=ti.i32, ndim=3), P: ti.types.ndarray(dtype=ti.f64, ndim=3),
+              seg: ti.types.ndarray(dtype=ti.f64, ndim=2), table: ti.types.ndarray(dtype=ti.i64, ndim=2),
               per_cell: ti.i64, out: ti.types.ndarray(dtype=ti.i64, ndim=1)):
         rows = b.shape[0]
         cols = b.shape[1]
         nbins = table.shape[0]
         for n, m in ti.ndrange(P.shape[0], seg.shape[0]):
             ok = True
-            fx = ti.Vector([0.0, 0.0], ti.f32)
-            fy = ti.Vector([0.0, 0.0], ti.f32)
+            fx = ti.Vector([0.0, 0.0], ti.f64)
+            fy = ti.Vector([0.0, 0.0], ti.f64)
             for e in ti.static(range(2)):
                 x = seg[m, 3 * e]
                 y = seg[m, 3 * e + 1]
@@ -51,10 +51,10 @@ def _build(ti):
                     fx[e] = u
                     fy[e] = v
             if ok:
-                ua = ti.cast(ti.floor(ti.cast(fx[0], ti.f64)), ti.i64)
-                va = ti.cast(ti.floor(ti.cast(fy[0], ti.f64)), ti.i64)
-                ub = ti.cast(ti.floor(ti.cast(fx[1], ti.f64)), ti.i64)
-                vb = ti.cast(ti.floor(ti.cast(fy[1], ti.f64)), ti.i64)
+                ua = ti.cast(ti.floor(fx[0]), ti.i64)
+                va = ti.cast(ti.floor(fy[0]), ti.i64)
+                ub = ti.cast(ti.floor(fx[1]), ti.i64)
+                vb = ti.cast(ti.floor(fy[1]), ti.i64)
                 dx = ub - ua
                 dy = vb - va
                 if dy < 0 or (dy == 0 and dx < 0):
@@ -107,7 +107,7 @@ class TaichiSimilarity:
         out = np.zeros(len(P), np.int64)
         if not len(P) or not len(seg_a):
             return out
-        seg = np.ascontiguousarray(np.column_stack([seg_a, seg_b]), np.float32)
-        self._score(np.ascontiguousarray(b, np.int32), np.ascontiguousarray(P, np.float32), seg,
+        seg = np.ascontiguousarray(np.column_stack([seg_a, seg_b]), np.float64)
+        self._score(np.ascontiguousarray(b, np.int32), np.ascontiguousarray(P, np.float64), seg,
                     np.ascontiguousarray(table, np.int64), int(reference.SUBPIXEL * cell_px), out)
         return out

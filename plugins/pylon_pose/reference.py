@@ -2,8 +2,10 @@
 its taichi twin and the tests prove them equal, score for score.
 
 Both take the same integer-exact route so that they can agree to the last vote:
-- a model segment's end points are projected by a 3 x 4 matrix P = K·[R|t]·M (float32, in one
-  fixed order of operations) and cut to 1/16 pixel (fixed point);
+- a model segment's end points are projected by a 3 x 4 matrix P = K·[R|t]·M in float64, in one
+  fixed order of operations, and cut to 1/16 pixel (fixed point): a GPU that fuses a multiply and
+  an add changes the last bit of a float64, which moves the cut only for a value within about
+  1e-12 of a 1/16 pixel boundary (in float32 some poses scored differently on CUDA);
 - its direction bin (0..179 degrees, undirected) is found by integer cross products against a
   table of bin boundaries (``direction_table``), not by atan2, whose last bit differs between
   libraries;
@@ -57,10 +59,10 @@ def walk_cells(c0x: int, c0y: int, c1x: int, c1y: int):
 
 def project_fixed(P: np.ndarray, xyz: np.ndarray):
     """Fixed-point pixel coordinates (int64, 1/16 px) of model points under each 3 x 4 matrix, and
-    whether each lies in front of the camera. P: (N, 3, 4) float32, xyz: (M, 3) float32 ->
+    whether each lies in front of the camera. P: (N, 3, 4), xyz: (M, 3), both taken as float64 ->
     (u, v, ok), each (N, M)."""
-    P = np.asarray(P, np.float32)
-    x, y, z = (np.asarray(xyz, np.float32)[None, :, k] for k in range(3))
+    P = np.asarray(P, np.float64)
+    x, y, z = (np.asarray(xyz, np.float64)[None, :, k] for k in range(3))
 
     def row(r):
         v = P[:, r, 0:1] * x
@@ -69,14 +71,13 @@ def project_fixed(P: np.ndarray, xyz: np.ndarray):
         return v + P[:, r, 3:4]
 
     pu, pv, pw = row(0), row(1), row(2)
-    ok = pw > np.float32(NEAR)
-    w = np.where(ok, pw, np.float32(1.0))
-    u = pu / w * np.float32(SUBPIXEL)
-    v = pv / w * np.float32(SUBPIXEL)
-    lim = np.float32(1e9)
-    ok &= (np.abs(u) < lim) & (np.abs(v) < lim)
-    u = np.where(ok, u, 0).astype(np.float64)
-    v = np.where(ok, v, 0).astype(np.float64)
+    ok = pw > NEAR
+    w = np.where(ok, pw, 1.0)
+    u = pu / w * SUBPIXEL
+    v = pv / w * SUBPIXEL
+    ok &= (np.abs(u) < 1e9) & (np.abs(v) < 1e9)
+    u = np.where(ok, u, 0.0)
+    v = np.where(ok, v, 0.0)
     return np.floor(u).astype(np.int64), np.floor(v).astype(np.int64), ok
 
 
