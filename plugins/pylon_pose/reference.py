@@ -37,10 +37,9 @@ def direction_bin(dx, dy, table: np.ndarray):
     lo = np.zeros(dx.shape, np.int64)
     hi = np.full(dx.shape, len(table), np.int64)
     while np.any(hi - lo > 1):
-        mid = (lo + hi) // 2
+        mid = (lo + hi) // 2  # < len(table) while hi - lo > 1
         act = hi - lo > 1
-        m = np.minimum(mid, len(table) - 1)
-        ccw = table[m, 0] * dy - table[m, 1] * dx >= 0
+        ccw = table[mid, 0] * dy - table[mid, 1] * dx >= 0
         lo = np.where(act & ccw, mid, lo)
         hi = np.where(act & ~ccw, mid, hi)
     return lo
@@ -55,6 +54,13 @@ def walk_cells(c0x: int, c0y: int, c1x: int, c1y: int):
         return np.array([c0x]), np.array([c0y])
     i = np.arange(n + 1, dtype=np.int64)
     return c0x + (2 * i * dx + n) // (2 * n), c0y + (2 * i * dy + n) // (2 * n)
+
+
+def cells_inside(c0x: int, c0y: int, c1x: int, c1y: int, rows: int, cols: int):
+    """``walk_cells`` kept to the grid of ``rows`` x ``cols`` cells: (rows, cols) indices."""
+    cx, cy = walk_cells(c0x, c0y, c1x, c1y)
+    inside = (cx >= 0) & (cx < cols) & (cy >= 0) & (cy < rows)
+    return cy[inside], cx[inside]
 
 
 def project_fixed(P: np.ndarray, xyz: np.ndarray):
@@ -98,9 +104,8 @@ def similarity(b: np.ndarray, P: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarra
         c1x, c1y = ub[n, m] // per_cell, vb[n, m] // per_cell
         if max(abs(c1x - c0x), abs(c1y - c0y)) > MAX_STEPS:
             continue
-        cx, cy = walk_cells(int(c0x), int(c0y), int(c1x), int(c1y))
-        inside = (cx >= 0) & (cx < cols) & (cy >= 0) & (cy < rows)
-        score[n] += int(b[cy[inside], cx[inside], d[n, m]].sum())
+        r, c = cells_inside(int(c0x), int(c0y), int(c1x), int(c1y), rows, cols)
+        score[n] += int(b[r, c, d[n, m]].sum())
     return score
 
 
@@ -115,7 +120,6 @@ def occupancy(segments: np.ndarray, shape: tuple[int, int], cell_px: int, table:
     d = direction_bin(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1], table)
     per_cell = SUBPIXEL * cell_px
     for (x0, y0, x1, y1), k in zip(s // per_cell, d):
-        cx, cy = walk_cells(int(x0), int(y0), int(x1), int(y1))
-        inside = (cx >= 0) & (cx < cols) & (cy >= 0) & (cy < rows)
-        a[cy[inside], cx[inside], k] = 1
+        r, c = cells_inside(int(x0), int(y0), int(x1), int(y1), rows, cols)
+        a[r, c, k] = 1
     return a

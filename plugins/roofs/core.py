@@ -278,107 +278,131 @@ class RoofLine:
     plane_b: int
 
 
-def roof_lines(xyz: np.ndarray, planes: list[Plane], link: float, min_angle_deg: float = 5.0,
-               horizontal_deg: float = 5.0) -> list[RoofLine]:
-    """Intersections of adjacent faces (their points within ``link`` in plan), clipped to where
-    both faces have points within ``link`` of the line. Kinds: a horizontal convex line is a ridge,
-    a sloped one a hip, a concave one a valley, one face up and one down a break."""
+def adjacent_pairs(xyz: np.ndarray, planes: list[Plane], link: float) -> list[tuple[int, int]]:
+    """Pairs (a, b), a < b, of faces with points within ``link`` of each other in plan, in order;
+    boxes that are farther apart than ``link`` are skipped before any tree is asked."""
     if len(planes) < 2:
         return []
-    centre = xyz.mean(axis=0)
-    p = xyz - centre
-    trees = [cKDTree(p[pl.indices, :2]) for pl in planes]
+    lo = np.array([xyz[pl.indices, :2].min(axis=0) for pl in planes])
+    hi = np.array([xyz[pl.indices, :2].max(axis=0) for pl in planes])
+    trees: dict[int, cKDTree] = {}
     out = []
     for a in range(len(planes)):
         for b in range(a + 1, len(planes)):
-            na, nb = planes[a].normal, planes[b].normal
-            u = np.cross(na, nb)
-            if np.linalg.norm(u) < np.sin(np.radians(min_angle_deg)):
-                continue  # nearly parallel: a step between them, not an intersection
-            if trees[a].query(p[planes[b].indices, :2], distance_upper_bound=link)[0].min() > link:
+            if np.any(lo[b] > hi[a] + link) or np.any(lo[a] > hi[b] + link):
                 continue
-            u /= np.linalg.norm(u)
-            if u[0] < 0 or (u[0] == 0 and u[1] < 0):
-                u = -u
-            da = planes[a].d - na @ centre
-            db = planes[b].d - nb @ centre
-            x0 = np.linalg.lstsq(np.vstack([na, nb, u]), np.array([da, db, 0.0]), rcond=None)[0]
-            spans = []
-            sides = []
-            for pl in (planes[a], planes[b]):
-                q = p[pl.indices] - x0
-                t = q @ u
-                off = q - t[:, None] * u
-                near = np.linalg.norm(off, axis=1) <= link
-                if near.sum() < 2:
-                    break
-                spans.append((t[near].min(), t[near].max()))
-                sides.append(off[near].mean(axis=0))
-            if len(spans) < 2:
-                continue
-            lo, hi = max(spans[0][0], spans[1][0]), min(spans[0][1], spans[1][1])
-            if hi - lo < link:
-                continue  # the faces meet at a corner only
-            down = [s[2] < 0 for s in sides]
-            if all(down):
-                kind = "ridge" if abs(u[2]) < np.sin(np.radians(horizontal_deg)) else "hip"
-            elif not any(down):
-                kind = "valley"
-            else:
-                kind = "break"
-            out.append(RoofLine(x0 + lo * u + centre, x0 + hi * u + centre, kind, a, b))
+            if a not in trees:
+                trees[a] = cKDTree(xyz[planes[a].indices, :2])
+            if trees[a].query(xyz[planes[b].indices, :2], distance_upper_bound=link)[0].min() <= link:
+                out.append((a, b))
+    return out
+
+
+def roof_lines(xyz: np.ndarray, planes: list[Plane], link: float, min_angle_deg: float = 5.0,
+               horizontal_deg: float = 5.0, pairs=None) -> list[RoofLine]:
+    """Intersections of adjacent faces (``pairs`` from ``adjacent_pairs``, computed when not
+    given), clipped to where both faces have points within ``link`` of the line. Kinds: a
+    horizontal convex line is a ridge, a sloped one a hip, a concave one a valley, one face up and
+    one down a break."""
+    if len(planes) < 2:
+        return []
+    if pairs is None:
+        pairs = adjacent_pairs(xyz, planes, link)
+    centre = xyz.mean(axis=0)
+    p = xyz - centre
+    out = []
+    for a, b in pairs:
+        na, nb = planes[a].normal, planes[b].normal
+        u = np.cross(na, nb)
+        if np.linalg.norm(u) < np.sin(np.radians(min_angle_deg)):
+            continue  # nearly parallel: a step between them, not an intersection
+        u /= np.linalg.norm(u)
+        if u[0] < 0 or (u[0] == 0 and u[1] < 0):
+            u = -u
+        da = planes[a].d - na @ centre
+        db = planes[b].d - nb @ centre
+        x0 = np.linalg.lstsq(np.vstack([na, nb, u]), np.array([da, db, 0.0]), rcond=None)[0]
+        spans = []
+        sides = []
+        for pl in (planes[a], planes[b]):
+            q = p[pl.indices] - x0
+            t = q @ u
+            off = q - t[:, None] * u
+            near = np.linalg.norm(off, axis=1) <= link
+            if near.sum() < 2:
+                break
+            spans.append((t[near].min(), t[near].max()))
+            sides.append(off[near].mean(axis=0))
+        if len(spans) < 2:
+            continue
+        lo, hi = max(spans[0][0], spans[1][0]), min(spans[0][1], spans[1][1])
+        if hi - lo < link:
+            continue  # the faces meet at a corner only
+        down = [s[2] < 0 for s in sides]
+        if all(down):
+            kind = "ridge" if abs(u[2]) < np.sin(np.radians(horizontal_deg)) else "hip"
+        elif not any(down):
+            kind = "valley"
+        else:
+            kind = "break"
+        out.append(RoofLine(x0 + lo * u + centre, x0 + hi * u + centre, kind, a, b))
     return out
 
 
 def step_edges(xyz: np.ndarray, planes: list[Plane], outlines: list, link: float, min_step: float,
-               skip_pairs=frozenset()) -> list[RoofLine]:
+               pairs=None, skip_pairs=frozenset()) -> list[RoofLine]:
     """Height jumps between adjacent faces that do not meet in a line (a flat roof beside a lower
     one, the terraces of a stepped roof, a sawtooth's risers): the parts of the upper face's
     outline (``outlines[i]``, a shapely polygon in plan) within ``link`` of the lower face's
     points, where the upper face's border points stand at least ``min_step`` (median) over their
     nearest neighbours on the lower one.
-    Pairs in ``skip_pairs`` (those with an intersection line) are left out. One RoofLine per
-    straight run of outline (the outline's vertices keep their z on the upper plane)."""
+    Only adjacent ``pairs`` (from ``adjacent_pairs``, computed when not given) are looked at, and
+    those in ``skip_pairs`` (with an intersection line) are left out. One RoofLine per straight run
+    of outline (the outline's vertices keep their z on the upper plane)."""
     import shapely
     from shapely.geometry import LineString, MultiPoint
 
     if len(planes) < 2:
         return []
-    trees = [cKDTree(xyz[pl.indices, :2]) for pl in planes]
+    if pairs is None:
+        pairs = adjacent_pairs(xyz, planes, link)
+    trees = {}
     out = []
-    for a in range(len(planes)):
-        for b in range(a + 1, len(planes)):
-            if (a, b) in skip_pairs:
-                continue
-            pa, pb = xyz[planes[a].indices], xyz[planes[b].indices]
-            dist_a, nn_a = trees[b].query(pa[:, :2], distance_upper_bound=link)
-            near_a = dist_a <= link
-            if near_a.sum() < 2:
-                continue
-            dist_b, nn_b = trees[a].query(pb[:, :2], distance_upper_bound=link)
-            near_b = dist_b <= link
-            # which face is up: each border point against its nearest neighbour on the other face
-            # (faces that meet at a corner or a hip have neighbours at their own height)
-            jump = np.median(np.r_[pa[near_a, 2] - pb[nn_a[near_a], 2], pa[nn_b[near_b], 2] - pb[near_b, 2]])
-            if abs(jump) < min_step:
-                continue
-            up, low_pts = (a, pb[near_b]) if jump > 0 else (b, pa[near_a])
-            if planes[up].normal[2] < 0.05:
-                continue  # a wall-like face: no outline in plan to speak of
-            border = outlines[up].exterior.intersection(MultiPoint(low_pts[:, :2]).buffer(link))
-            pieces = [g for g in getattr(border, "geoms", [border]) if isinstance(g, LineString) and not g.is_empty]
-            if not pieces:
-                continue
-            merged = shapely.line_merge(shapely.union_all(pieces))  # the ring's start may split a run in two
-            pieces = [shapely.simplify(g, 0.5 * link) for g in getattr(merged, "geoms", [merged])]
-            n, d = planes[up].normal, planes[up].d
-            for g in pieces:
-                if g.length < 2 * link:
-                    continue  # faces that touch at a corner only
-                c = np.asarray(g.coords)
-                for i in range(len(c) - 1):
-                    if np.hypot(*(c[i + 1] - c[i])) < link:
-                        continue
-                    ends = [np.r_[q, (d - q @ n[:2]) / n[2]] for q in (c[i], c[i + 1])]
-                    out.append(RoofLine(ends[0], ends[1], "step", up, b if up == a else a))
+    for a, b in pairs:
+        if (a, b) in skip_pairs:
+            continue
+        for k in (a, b):
+            if k not in trees:
+                trees[k] = cKDTree(xyz[planes[k].indices, :2])
+        pa, pb = xyz[planes[a].indices], xyz[planes[b].indices]
+        dist_a, nn_a = trees[b].query(pa[:, :2], distance_upper_bound=link)
+        near_a = dist_a <= link
+        if near_a.sum() < 2:
+            continue
+        dist_b, nn_b = trees[a].query(pb[:, :2], distance_upper_bound=link)
+        near_b = dist_b <= link
+        # which face is up: each border point against its nearest neighbour on the other face
+        # (faces that meet at a corner or a hip have neighbours at their own height)
+        jump = np.median(np.r_[pa[near_a, 2] - pb[nn_a[near_a], 2], pa[nn_b[near_b], 2] - pb[near_b, 2]])
+        if abs(jump) < min_step:
+            continue
+        up, low_pts = (a, pb[near_b]) if jump > 0 else (b, pa[near_a])
+        if planes[up].normal[2] < 0.05:
+            continue  # a wall-like face: no outline in plan to speak of
+        border = outlines[up].exterior.intersection(MultiPoint(low_pts[:, :2]).buffer(link))
+        pieces = [g for g in getattr(border, "geoms", [border]) if isinstance(g, LineString) and not g.is_empty]
+        if not pieces:
+            continue
+        merged = shapely.line_merge(shapely.union_all(pieces))  # the ring's start may split a run in two
+        pieces = [shapely.simplify(g, 0.5 * link) for g in getattr(merged, "geoms", [merged])]
+        n, d = planes[up].normal, planes[up].d
+        for g in pieces:
+            if g.length < 2 * link:
+                continue  # faces that touch at a corner only
+            c = np.asarray(g.coords)
+            for i in range(len(c) - 1):
+                if np.hypot(*(c[i + 1] - c[i])) < link:
+                    continue
+                ends = [np.r_[q, (d - q @ n[:2]) / n[2]] for q in (c[i], c[i + 1])]
+                out.append(RoofLine(ends[0], ends[1], "step", up, b if up == a else a))
     return out

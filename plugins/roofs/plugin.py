@@ -111,8 +111,9 @@ def _run(inputs, params, ctx):
                 if not isinstance(hull, Polygon):
                     hull = hull.buffer(0.5 * spacing)
             hulls.append(hull)
-        meets = core.roof_lines(xyz[g], planes, link)
-        steps = core.step_edges(xyz[g], planes, hulls, link, 2 * params["max_distance_m"] / hu,
+        pairs = core.adjacent_pairs(xyz[g], planes, link)
+        meets = core.roof_lines(xyz[g], planes, link, pairs=pairs)
+        steps = core.step_edges(xyz[g], planes, hulls, link, 2 * params["max_distance_m"] / hu, pairs=pairs,
                                 skip_pairs={(ln.plane_a, ln.plane_b) for ln in meets})
         for ln in meets + steps:
             line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
