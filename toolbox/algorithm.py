@@ -17,7 +17,7 @@ from .errors import UsageError
 
 #: Kinds of data the host knows how to read and write.
 INPUT_KINDS = ("points", "raster", "vector", "photos")
-OUTPUT_KINDS = ("points", "raster", "vector", "json", "image")
+OUTPUT_KINDS = ("points", "raster", "vector", "json", "image", "folder")
 #: File extension of each output kind (the first is the default).
 OUTPUT_EXTENSIONS = {
     "points": (".laz", ".las"),
@@ -25,6 +25,7 @@ OUTPUT_EXTENSIONS = {
     "vector": (".gpkg",),
     "json": (".json",),
     "image": (".png",),
+    "folder": ("",),  # files under a folder: the output folder itself (see runner.write_output)
 }
 PARAM_TYPES = (float, int, bool, str)
 _ID_RE = re.compile(r"^[a-z][a-z0-9]*(-[a-z0-9]+)*$")

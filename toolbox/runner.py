@@ -177,6 +177,9 @@ def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, 
         primary_path = out
     paths = {primary.name: Path(named.get(primary.name, primary_path))}
     for o in alg.outputs[1:]:
+        if o.kind == "folder":  # its files go into the output folder (beside the primary)
+            paths[o.name] = Path(named[o.name]) if o.name in named else base.parent
+            continue
         p = Path(named[o.name]) if o.name in named else base.with_name(f"{base.name}{o.suffix or '_' + o.name}{o.extension}")
         if p.suffix.lower() not in OUTPUT_EXTENSIONS[o.kind]:
             raise UsageError(f"output {str(p)!r}: {alg.id}'s output {o.name!r} is {o.kind}; use {', '.join(OUTPUT_EXTENSIONS[o.kind])}")
@@ -247,6 +250,11 @@ def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) 
         with atomic_path(path, overwrite) as tmp:
             tmp.write_text(json.dumps(data, indent=2, default=_json_default), encoding="utf-8")
         return {"keys": sorted(data)[:20] if isinstance(data, dict) else None}
+    if kind == "folder":
+        from .io.atomic import write_folder
+
+        entries = write_folder(data, path, overwrite)
+        return {"entries": entries, "n_files": len(data)}
     if kind == "image":
         from .io.rasters import Raster, write_image
 
@@ -329,13 +337,17 @@ class _OutputWriter:
         done = []
         for name, fut in self.futures.items():
             try:
-                fut.result()
-                done.append(name)
+                done.append((name, fut.result()))
             except BaseException:  # noqa: BLE001 - the run is failing anyway; a failed write left nothing
                 pass
         self._close()
-        for name in done:
-            Path(self.paths[name]).unlink(missing_ok=True)
+        for name, summary in done:
+            if self.kinds[name] == "folder":
+                from .io.atomic import remove_entries
+
+                remove_entries(self.paths[name], summary.get("entries", []))
+            else:
+                Path(self.paths[name]).unlink(missing_ok=True)
 
     def _close(self):
         if self._pool is not None:
@@ -402,10 +414,14 @@ def run_algorithm(
     optional = {o.name for o in alg.outputs if o.optional}
     requested = frozenset(n for n in (outputs or {}) if n in optional)
     paths = {n: p for n, p in paths.items() if n not in optional or n in requested}
-    from .io.atomic import check_writable
+    from .io.atomic import check_folder, check_writable
 
-    for p in paths.values():
-        check_writable(p, overwrite)
+    kinds = {o.name: o.kind for o in alg.outputs}
+    for name, p in paths.items():
+        if kinds[name] == "folder":
+            check_folder(p)
+        else:
+            check_writable(p, overwrite)
 
     specs = {s.name: s for s in alg.inputs}
     # a run that writes points writes every dimension: read them all; otherwise only the declared

@@ -7,7 +7,7 @@ import toolbox
 from toolbox import Algorithm, Output, Parameter, UsageError
 
 MAX_POINTS = 200_000_000
-KINDS = ("corridor", "terrain", "roofs")
+KINDS = ("corridor", "terrain", "roofs", "pylons")
 
 
 def _run(inputs, params, ctx):
@@ -22,6 +22,8 @@ def _run(inputs, params, ctx):
 
     from toolbox.synthetic.scene import DEFAULT_EXTENT
 
+    if params["kind"] == "pylons":
+        return _pylons(params, ctx)
     W0, H0 = DEFAULT_EXTENT[params["kind"]]
     W = params["width_m"] or W0
     H = params["height_m"] or H0
@@ -52,9 +54,30 @@ def _run(inputs, params, ctx):
              "n_trees": len(scene.truth["trees"]), "n_wires": len(scene.truth["wires"]),
              "n_pylons": len(scene.truth["pylons"]), "n_crossings": len(scene.truth["crossings"])}
     return toolbox.Result(
-        outputs={"points": pc, "truth": truth_layers(scene, crs), "truth_json": truth_json(scene), "dtm": dtm},
+        outputs={"points": pc, "truth": truth_layers(scene, crs), "truth_json": truth_json(scene), "dtm": dtm,
+                 "dem": None, "survey": None},
         stats=stats,
     )
+
+
+def _pylons(params, ctx):
+    """kind=pylons: a UAV photo survey of lattice pylons (no point cloud)."""
+    from toolbox.io.points import parse_crs
+    from toolbox.io.rasters import Raster
+    from toolbox.synthetic.pylons import make_pylon_survey, survey_files
+
+    crs = parse_crs(params["crs"])
+    if not crs.is_projected:
+        raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
+    s = make_pylon_survey(params["seed"], params["n_pylons"], params["photos_per_pylon"], params["span_m"] or 150.0,
+                          (params["origin_x"], params["origin_y"]), params["crs"], slope_pct=params["slope_pct"])
+    files = survey_files(s, progress=ctx.progress)
+    dem = Raster(s.dem, s.dem_transform, crs=crs, nodata=float("nan"), style="dtm",
+                 description="terrain heights of the photo survey (cell centres)")
+    return toolbox.Result(
+        outputs={"points": None, "truth": None, "truth_json": s.truth(), "dtm": None, "dem": dem, "survey": files},
+        stats={"kind": "pylons", "seed": s.seed, "n_pylons": len(s.pylons), "n_photos": len(s.shots),
+               "pylon_types": sorted({p.model for p in s.pylons})})
 
 
 @toolbox.hookimpl
@@ -69,7 +92,10 @@ def toolbox_algorithms():
             "60 m halls with flat, gable, hip and hip-with-dormer roofs; trees and bushes with multiple returns; "
             "low outliers; and for kind=corridor a double-circuit transmission line on lattice pylons (bundled "
             "phases, earth wire) crossed at a sharp angle by a lower distribution line. Writes the points (the "
-            "classification is the truth), the truth as GeoPackage and JSON, and the true DTM."
+            "classification is the truth), the truth as GeoPackage and JSON, and the true DTM. kind=pylons writes "
+            "a UAV photo survey instead: JPEG photos of lattice pylons (two types) in clutter with lens distortion, "
+            "their cameras as a COLMAP text model and a Metashape XML, the DEM, the pylon types as OBJ and the true "
+            "poses as JSON."
         ),
         reference="Scene truth for the methods of Grigillo et al. 2015 (power lines), Mongus & Žalik 2014 (DTM), "
                   "Borowiec (roof planes, test building with a gable dormer); see METHODS.md.",
@@ -111,6 +137,10 @@ def toolbox_algorithms():
                       "triangle; 4 a square)", minimum=1, maximum=4),
             Parameter("bundle_spacing_m", float, 0.6, "double-circuit: the distance between sub-conductors",
                       unit="m", minimum=0.2, maximum=2.0),
+            Parameter("n_pylons", int, 3, "pylons: lattice pylons along a line, alternating types VL-220 (180° "
+                      "symmetric) and U-110 (asymmetric top)", minimum=1, maximum=12),
+            Parameter("photos_per_pylon", int, 12, "pylons: photos of each pylon from 100-150 m, a sixth of them "
+                      "nadir, the rest oblique (35-70° elevation) all round", minimum=3, maximum=60),
             Parameter("roof_set", str, "basic", "roofs: the buildings (basic: gable, hip, hip with a dormer, flat; all: "
                       "also pyramid, shed, mansard and gambrel, on a 240 x 170 m scene)", choices=("basic", "all")),
         ],
@@ -122,5 +152,8 @@ def toolbox_algorithms():
                    "pylons, trees, water", suffix="_truth"),
             Output("truth_json", "json", "the same truth as JSON, with class counts and scene parameters", suffix="_truth"),
             Output("dtm", "raster", "true bare-earth DTM", style="dtm"),
+            Output("dem", "raster", "kind=pylons: the terrain heights under the photo survey", style="dtm", suffix="_dem"),
+            Output("survey", "folder", "kind=pylons: photos/ (JPEG), colmap/ (COLMAP text model), cameras.xml (the "
+                   "same cameras as a Metashape XML), models/*.obj (each pylon type's beams), in the output folder"),
         ],
     )]

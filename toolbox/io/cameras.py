@@ -189,3 +189,194 @@ def write_colmap_text(folder, cameras, images) -> None:
     (folder / "cameras.txt").write_text("\n".join(cam_lines) + "\n", encoding="utf-8")
     (folder / "images.txt").write_text("\n".join(img_lines) + "\n", encoding="utf-8")
     (folder / "points3D.txt").write_text("# 3D point list (empty)\n", encoding="utf-8")
+
+
+# ----------------------------------------------------------------------------------------------
+# Agisoft Metashape camera XML (File > Export > Export Cameras > Agisoft XML)
+# ----------------------------------------------------------------------------------------------
+# Metashape stores each camera as a 4 x 4 camera-to-chunk transform (camera axes as OpenCV's: x
+# right, y down, z forward) in the chunk's internal frame, and the chunk's <transform> (rotation,
+# translation, scale) maps that frame to geocentric (ECEF) coordinates when the chunk has a
+# geographic or projected CRS (its <reference>); for a local CRS, straight to it. Its calibration
+# gives f and the principal point as an offset from the image centre, with b1 (affinity: fx = f +
+# b1) and its tangential terms swapped relative to OpenCV (Metashape p1 = OpenCV p2).
+
+
+def _chunk_to_world(crs_wkt: str | None, target_crs):
+    """A function mapping geocentric or local coordinates (N, 3) to the target CRS's (E, N, h),
+    and whether the chunk is geocentric."""
+    from pyproj import CRS, Transformer
+
+    if not crs_wkt or crs_wkt.strip().upper().startswith("LOCAL_CS") or target_crs is None:
+        return (lambda p: np.asarray(p, float)), False
+    tgt = CRS.from_user_input(target_crs)
+    tr = Transformer.from_crs(CRS.from_epsg(4978), tgt.to_3d(), always_xy=True)
+
+    def f(p):
+        p = np.asarray(p, float).reshape(-1, 3)
+        return np.column_stack(tr.transform(p[:, 0], p[:, 1], p[:, 2]))
+
+    return f, True
+
+
+def _orthonormal(M: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(M)
+    R = u @ vt
+    return R if np.linalg.det(R) > 0 else -R
+
+
+def read_metashape_xml(path, crs=None) -> tuple[dict[int, Camera], dict[int, Image]]:
+    """Cameras and images of a Metashape camera XML in the toolbox's world convention. ``crs`` is
+    the CRS of the world coordinates wanted (the DEM's); needed when the chunk is georeferenced.
+    Cameras without a transform (not aligned) are left out."""
+    import xml.etree.ElementTree as ET
+
+    path = Path(path)
+    try:
+        root = ET.parse(path).getroot()
+    except FileNotFoundError:
+        raise DataError(f"camera file {str(path)!r} does not exist; check the path") from None
+    except ET.ParseError as exc:
+        raise DataError(f"{str(path)!r} is not a readable Metashape camera XML ({exc}); export it again "
+                        "(File > Export > Export Cameras > Agisoft XML)") from None
+    chunk = root.find("chunk") if root.tag != "chunk" else root
+    if chunk is None or chunk.find("sensors") is None or chunk.find("cameras") is None:
+        raise DataError(f"{str(path)!r} has no <chunk> with <sensors> and <cameras>; give a Metashape camera XML")
+
+    def num(el, tag, default=0.0):
+        e = el.find(tag)
+        return float(e.text) if e is not None and e.text is not None else default
+
+    cameras: dict[int, Camera] = {}
+    for s in chunk.find("sensors"):
+        cal = s.find("calibration")
+        res = s.find("resolution") if cal is None or cal.find("resolution") is None else cal.find("resolution")
+        if cal is None or res is None:
+            raise DataError(f"{str(path)!r}: sensor {s.get('id')} has no calibration; calibrate the cameras in "
+                            "Metashape first (Align Photos)")
+        w, h = int(res.get("width")), int(res.get("height"))
+        f = num(cal, "f")
+        if cal.get("type", "frame") != "frame" or f <= 0:
+            raise DataError(f"{str(path)!r}: sensor {s.get('id')} is not a calibrated frame camera (type "
+                            f"{cal.get('type')!r}); only frame cameras are supported")
+        if num(cal, "b2") != 0.0 or num(cal, "k4") != 0.0:
+            raise DataError(f"{str(path)!r}: sensor {s.get('id')} uses b2 or k4, which the OpenCV model lacks; fix "
+                            "them to 0 in Metashape's camera calibration and re-optimise")
+        params = (f + num(cal, "b1"), f, w / 2 + num(cal, "cx"), h / 2 + num(cal, "cy"), num(cal, "k1"),
+                  num(cal, "k2"), num(cal, "p2"), num(cal, "p1"), num(cal, "k3"), 0.0, 0.0, 0.0)
+        cameras[int(s.get("id"))] = Camera(int(s.get("id")), "FULL_OPENCV", w, h, params)
+
+    S, Rch, Tch = 1.0, np.eye(3), np.zeros(3)
+    tr = chunk.find("transform")
+    if tr is not None:
+        if tr.find("rotation") is not None:
+            Rch = np.array(tr.find("rotation").text.split(), float).reshape(3, 3)
+        if tr.find("translation") is not None:
+            Tch = np.array(tr.find("translation").text.split(), float)
+        S = num(tr, "scale", 1.0)
+    ref = chunk.find("reference")
+    to_world, geocentric = _chunk_to_world(ref.text if ref is not None else None, crs)
+    if geocentric and crs is None:
+        raise DataError(f"{str(path)!r} is georeferenced; give the DEM so that its CRS is known")
+    images: dict[int, Image] = {}
+    for c in chunk.find("cameras").iter("camera"):
+        t = c.find("transform")
+        if t is None or c.get("enabled", "true") == "false":
+            continue
+        sid = int(c.get("sensor_id"))
+        if sid not in cameras:
+            raise DataError(f"{str(path)!r}: camera {c.get('label')!r} uses sensor {sid}, which <sensors> lacks")
+        M = np.array(t.text.split(), float).reshape(4, 4)
+        centre_c = S * Rch @ M[:3, 3] + Tch
+        axes_c = Rch @ M[:3, :3]  # camera axes (columns) in the chunk's outer frame
+        centre = to_world(centre_c)[0]
+        if geocentric:  # camera axes through the map's local frame: one metre along each, projected
+            ends = to_world(centre_c + axes_c.T)
+            axes = _orthonormal((ends - centre).T)
+        else:
+            axes = _orthonormal(axes_c)
+        R = axes.T
+        label = c.get("label")
+        images[int(c.get("id"))] = Image(int(c.get("id")), label, sid, quaternion_from_matrix(R), -R @ centre)
+    if not images:
+        raise DataError(f"{str(path)!r} holds no aligned camera; align the photos in Metashape first")
+    return cameras, images
+
+
+def write_metashape_xml(path, camera: Camera, images, crs: str, scale: float = 1.0) -> None:
+    """A Metashape camera XML of ``images`` (one sensor, ``camera``: PINHOLE or OPENCV) in a chunk
+    georeferenced to ``crs`` through a geocentric chunk transform (a local frame at the cameras'
+    centre, scaled by ``scale``), as Metashape writes it."""
+    from pyproj import CRS, Transformer
+
+    fx, fy, cx, cy = (float(v) for v in (camera.K[0, 0], camera.K[1, 1], camera.K[0, 2], camera.K[1, 2]))
+    k1, k2, p1, p2, k3 = (float(v) for v in camera.distortion[:5])
+    tgt = CRS.from_user_input(crs)
+    to_geo = Transformer.from_crs(tgt.to_3d(), CRS.from_epsg(4978), always_xy=True)
+    imgs = list(images.values() if isinstance(images, dict) else images)
+    centres = np.array([i.centre for i in imgs])
+    mid = centres.mean(axis=0)
+    T = np.array(to_geo.transform(*mid))
+    east = np.array(to_geo.transform(mid[0] + 1, mid[1], mid[2])) - T
+    north = np.array(to_geo.transform(mid[0], mid[1] + 1, mid[2])) - T
+    Rch = _orthonormal(np.column_stack([east, north, np.cross(east, north)]))
+
+    def to_chunk(p):
+        g = np.column_stack(to_geo.transform(*np.asarray(p, float).reshape(-1, 3).T))
+        return (g - T) @ Rch / scale
+
+    cams = []
+    for k, i in enumerate(imgs):
+        c = to_chunk(i.centre)[0]
+        ends = to_chunk(i.centre + i.R)  # rows of R: the camera axes in the world frame
+        axes = _orthonormal((ends - c).T)
+        M = np.eye(4)
+        M[:3, :3], M[:3, 3] = axes, c
+        label = i.name
+        cams.append(f'      <camera id="{k}" sensor_id="0" label="{label}">\n'
+                    f'        <transform>{" ".join(repr(float(v)) for v in M.ravel())}</transform>\n      </camera>')
+    xml = f'''<?xml version="1.0" encoding="UTF-8"?>
+<document version="1.5.0">
+  <chunk label="Chunk 1" enabled="true">
+    <sensors next_id="1">
+      <sensor id="0" label="synthetic ({camera.width}x{camera.height})" type="frame">
+        <resolution width="{camera.width}" height="{camera.height}"/>
+        <calibration type="frame" class="adjusted">
+          <resolution width="{camera.width}" height="{camera.height}"/>
+          <f>{fy!r}</f>
+          <cx>{cx - camera.width / 2!r}</cx>
+          <cy>{cy - camera.height / 2!r}</cy>
+          <b1>{fx - fy!r}</b1>
+          <k1>{k1!r}</k1>
+          <k2>{k2!r}</k2>
+          <k3>{k3!r}</k3>
+          <p1>{p2!r}</p1>
+          <p2>{p1!r}</p2>
+        </calibration>
+      </sensor>
+    </sensors>
+    <cameras next_id="{len(imgs)}" next_group_id="0">
+{chr(10).join(cams)}
+    </cameras>
+    <reference>{tgt.to_wkt()}</reference>
+    <transform>
+      <rotation locked="false">{" ".join(repr(float(v)) for v in Rch.ravel())}</rotation>
+      <translation locked="false">{" ".join(repr(float(v)) for v in T)}</translation>
+      <scale locked="false">{scale!r}</scale>
+    </transform>
+  </chunk>
+</document>
+'''
+    Path(path).write_text(xml, encoding="utf-8")
+
+
+def read_cameras(path, crs=None) -> tuple[dict[int, Camera], dict[int, Image]]:
+    """A COLMAP text model folder or a Metashape camera XML."""
+    p = Path(path)
+    if p.is_dir():
+        return read_colmap_text(p)
+    if p.suffix.lower() == ".xml":
+        return read_metashape_xml(p, crs)
+    if not p.exists():
+        raise DataError(f"cameras {str(p)!r} do not exist; give a COLMAP text model folder or a Metashape camera XML")
+    raise DataError(f"cameras {str(p)!r}: not a folder (COLMAP text model) nor a .xml (Metashape camera XML)")
