@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping, Sequence
 from .errors import UsageError
 
 #: Kinds of data the host knows how to read and write.
-INPUT_KINDS = ("points", "raster", "vector", "photos")
+INPUT_KINDS = ("points", "raster", "vector", "photos", "file")  # file: any file or folder the algorithm reads itself
 OUTPUT_KINDS = ("points", "raster", "vector", "json", "image", "folder")
 #: File extension of each output kind (the first is the default).
 OUTPUT_EXTENSIONS = {

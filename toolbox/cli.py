@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help="primary output file, or a folder")
     sp.add_argument("--set", dest="params", action="append", default=[], metavar="NAME=VALUE",
                     help="set a parameter (repeatable)")
+    sp.add_argument("--input", dest="named_inputs", action="append", default=[], metavar="NAME=PATH",
+                    help="give the input NAME (see 'toolbox help ALG'); positional INPUTs fill the others in order")
     sp.add_argument("--output-path", dest="named_outputs", action="append", default=[], metavar="NAME=PATH",
                     help="path of a secondary output (default: beside the primary one); also asks for optional outputs")
     sp.add_argument("--preview", metavar="PNG", help="write the algorithm's preview image (if it has one) here")
@@ -191,7 +193,7 @@ def cmd_run(args) -> int:
         raise UsageError("--buffer-m and --scheduler belong to survey runs; add --tile-size-m")
     if args.tile_size_m is not None:
         return _run_survey(args, alg, params, named, reg)
-    if is_batch(alg, args.inputs):
+    if is_batch(alg, args.inputs) and not args.named_inputs:
         if named:
             raise UsageError("--output-path/--preview name single files; a batch writes every output into the folder")
         rep = run_batch(alg.id, args.inputs, args.output, params, overwrite=args.overwrite, crs=args.crs,
@@ -204,7 +206,13 @@ def cmd_run(args) -> int:
             for f in rep["failed"]:
                 print(f"  FAILED {f['input']}: {f['error']}")
         return 1 if rep["n_failed"] else 0
-    rep = run_algorithm(alg.id, args.inputs, args.output, params, outputs=named,
+    if args.named_inputs:
+        from .runner import assign_inputs
+
+        inputs = assign_inputs(alg, args.inputs, _pairs(args.named_inputs, "--input"))
+    else:
+        inputs = args.inputs
+    rep = run_algorithm(alg.id, inputs, args.output, params, outputs=named,
                         overwrite=args.overwrite, crs=args.crs, reg=reg)
     if args.json:
         print(json.dumps(rep, indent=2, default=str))

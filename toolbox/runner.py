@@ -27,7 +27,8 @@ INPUT_EXTENSIONS = {
     "vector": (".gpkg", ".shp", ".geojson", ".json", ".fgb"),
     "photos": (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".json"),
 }
-KIND_WORDS = {"points": "a point cloud", "raster": "a raster", "vector": "a vector file", "photos": "a photo set"}
+KIND_WORDS = {"points": "a point cloud", "raster": "a raster", "vector": "a vector file", "photos": "a photo set",
+              "file": "a file or folder"}
 
 
 @dataclass
@@ -107,15 +108,22 @@ def input_kind_of(path: str | os.PathLike) -> str | None:
     return None
 
 
-def assign_inputs(alg: Algorithm, files: Sequence[str]) -> dict[str, Any]:
-    """Map positional files onto the algorithm's declared inputs, checking their kinds."""
-    specs = list(alg.inputs)
+def assign_inputs(alg: Algorithm, files: Sequence[str], named: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """Map files onto the algorithm's declared inputs, checking their kinds: ``named`` ({input
+    name: path}, the CLI's --input NAME=PATH) first, the positional files to the others in order."""
+    named = dict(named or {})
+    every = {s.name for s in alg.inputs}
+    for n in named:
+        if n not in every:
+            raise UsageError(f"{alg.id} has no input {n!r}; its inputs: {', '.join(s.name for s in alg.inputs) or 'none'}")
+    specs = [s for s in alg.inputs if s.name not in named]
     files = [str(f) for f in files]
     if not specs:
         if files:
-            raise UsageError(f"{alg.id} takes no input file, but {len(files)} were given")
-        return {}
-    assigned: dict[str, Any] = {}
+            raise UsageError(f"{alg.id} takes no further input file, but {len(files)} were given")
+        return _checked_kinds(alg, {n: ([v] if s.multiple else v) for s in alg.inputs for n, v in named.items() if n == s.name})
+    assigned: dict[str, Any] = {s.name: ([named[s.name]] if s.multiple else named[s.name]) for s in alg.inputs
+                                if s.name in named}
     rest = list(files)
     for i, spec in enumerate(specs):
         last = i == len(specs) - 1
@@ -135,12 +143,16 @@ def assign_inputs(alg: Algorithm, files: Sequence[str]) -> dict[str, Any]:
             assigned[spec.name] = rest.pop(0)
     if rest:
         raise UsageError(f"{alg.id} takes {len(specs)} input(s) but {len(files)} files were given: {', '.join(rest)} left over")
-    for spec in specs:
+    return _checked_kinds(alg, assigned)
+
+
+def _checked_kinds(alg: Algorithm, assigned: dict) -> dict:
+    for spec in alg.inputs:
         if spec.name not in assigned:
             continue
         vals = assigned[spec.name] if isinstance(assigned[spec.name], list) else [assigned[spec.name]]
         for f in vals:
-            if spec.kind == "photos":
+            if spec.kind in ("photos", "file"):
                 continue
             kind = input_kind_of(f)
             if kind != spec.kind:
@@ -204,7 +216,7 @@ def read_input(kind: str, path: str, crs=None, dims=None):
         from .io.vectors import read_vectors
 
         return read_vectors(path)
-    if kind == "photos":
+    if kind in ("photos", "file"):
         p = Path(path)
         if not p.exists():
             raise DataError(f"input {path!r} does not exist; check the path")
@@ -496,7 +508,7 @@ def expand_inputs(files: Sequence[str], kind: str) -> list[str]:
 def is_batch(alg: Algorithm, files: Sequence[str]) -> bool:
     if len(alg.inputs) != 1 or alg.inputs[0].multiple:
         return False
-    return len(files) > 1 or any(Path(f).is_dir() and alg.inputs[0].kind != "photos" for f in files)
+    return len(files) > 1 or any(Path(f).is_dir() and alg.inputs[0].kind not in ("photos", "file") for f in files)
 
 
 def _batch_one(args) -> tuple[str, dict | None, str | None]:

@@ -1,0 +1,418 @@
+"""Detection and pose search of pylons in aligned photos (Serebro 2017, METHODS.md §4): pure
+functions on arrays and small records; no file access. Coordinates are world coordinates minus a
+local origin (keeps float64 projections exact to well under a millimetre)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import core, reference
+
+
+@dataclass
+class View:
+    """One aligned photo: ideal pinhole K, pose (X_cam = R·X + t in the local frame), its size and
+    its line segments in undistorted pixels (x0, y0, x1, y1; pixel centres at integer + 0.5)."""
+
+    name: str
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    segments: np.ndarray
+
+    @property
+    def centre(self) -> np.ndarray:
+        return -self.R.T @ self.t
+
+    def project(self, X: np.ndarray):
+        cam = np.atleast_2d(X) @ self.R.T + self.t
+        uv = cam[:, :2] / cam[:, 2:3] * [self.K[0, 0], self.K[1, 1]] + self.K[:2, 2]
+        return uv, cam[:, 2]
+
+    def rays(self, uv: np.ndarray) -> np.ndarray:
+        """Unit world directions through pixels."""
+        d = np.column_stack([uv, np.ones(len(uv))]) @ np.linalg.inv(self.K).T @ self.R
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def ray_terrain(C: np.ndarray, d: np.ndarray, ground, above_m: float = 0.0, t_max: float = 2000.0, iters: int = 40):
+    """Distance α along rays C + α·d (d: (N, 3) unit) where the ray is ``above_m`` over the
+    terrain (``ground(x, y)``), by bisection (the method's: unique where the terrain is never
+    steeper along the ray than the ray itself); NaN where the ray never gets there."""
+    d = np.atleast_2d(d)
+    lo = np.zeros(len(d))
+    hi = np.full(len(d), t_max)
+
+    def f(t):
+        P = C + t[:, None] * d
+        return P[:, 2] - ground(P[:, 0], P[:, 1]) - above_m
+
+    ok = (f(lo) > 0) & (f(hi) < 0)
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        above = f(mid) > 0
+        lo = np.where(above, mid, lo)
+        hi = np.where(above, hi, mid)
+    return np.where(ok, 0.5 * (lo + hi), np.nan)
+
+
+# ----------------------------------------------------------------------------------------------
+# Detection: triangles of line segments, clustered in each photo and across photos
+# ----------------------------------------------------------------------------------------------
+
+def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Shortest and longest side of the model's triangles: three beams meeting pairwise (at a
+    shared end or a crossing), sides between their meeting points."""
+    n = len(a)
+    P = np.full((n, n, 3), np.nan)
+    d1, d2 = b - a, None
+    for i in range(n):
+        d2 = b - a
+        r = a[i] - a
+        aa = d1[i] @ d1[i]
+        ee = np.einsum("ij,ij->i", d2, d2)
+        bb = d2 @ d1[i]
+        cc = r @ d1[i]
+        ff = np.einsum("ij,ij->i", d2, r)
+        den = aa * ee - bb * bb
+        par = den < 1e-12 * aa * ee
+        s = np.clip(np.where(par, 0, (bb * ff - cc * ee) / np.where(par, 1, den)), 0, 1)
+        u = np.clip((bb * s + ff) / ee, 0, 1)
+        s = np.clip((bb * u - cc) / aa, 0, 1)
+        p = a[i] + s[:, None] * d1[i]
+        q = a + u[:, None] * d2
+        hit = (np.linalg.norm(p - q, axis=1) < 1e-6) & ~par
+        hit[i] = False
+        P[i, hit] = p[hit]
+    adj = ~np.isnan(P[..., 0])
+    sides = []
+    for i in range(n):
+        for j in np.nonzero(adj[i])[0]:
+            if j <= i:
+                continue
+            for k in np.nonzero(adj[i] & adj[j])[0]:
+                if k <= j:
+                    continue
+                v = np.array([P[i, j], P[j, k], P[i, k]])
+                s3 = np.linalg.norm(v - np.roll(v, 1, axis=0), axis=1)
+                if s3.min() > 1e-3:
+                    sides.append(s3)
+    sides = np.array(sides)
+    return float(sides.min()), float(sides.max())
+
+
+def photo_triangles(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.ndarray, extend: float = 1.5,
+                    min_angle_deg: float = 15.0, max_triangles: int = 200_000) -> np.ndarray:
+    """Centres (T, 2) of the photo's triangles: segments extended ``extend`` times about their
+    middle, pairwise intersections at ≥ ``min_angle_deg``, three segments meeting pairwise; each
+    triangle's sides within [min_side_px, max_side_px] of its first segment (the metric limits
+    turned into pixels at the segment's depth) and no angle under ``min_angle_deg``."""
+    if len(seg) < 3:
+        return np.empty((0, 2))
+    m = 0.5 * (seg[:, :2] + seg[:, 2:])
+    h = 0.5 * extend * (seg[:, 2:] - seg[:, :2])
+    p0, d = m - h, 2 * h
+    n = len(seg)
+    cross = d[:, None, 0] * d[None, :, 1] - d[:, None, 1] * d[None, :, 0]
+    w = p0[None, :, :] - p0[:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / cross
+        u = (w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]) / cross
+    L = np.linalg.norm(d, axis=1)
+    sin = np.abs(cross) / (L[:, None] * L[None, :])
+    adj = (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1) & (sin >= np.sin(np.radians(min_angle_deg)))
+    np.fill_diagonal(adj, False)
+    X = p0[:, None, :] + np.where(adj, s, 0)[..., None] * d[:, None, :]  # intersection points
+    centres = []
+    count = 0
+    for i in range(n):
+        nj = np.nonzero(adj[i, i + 1:])[0] + i + 1
+        for j in nj:
+            ks = np.nonzero(adj[i, j + 1:] & adj[j, j + 1:])[0] + j + 1
+            if not len(ks):
+                continue
+            A, B, Cs = X[i, j], X[i, ks], X[j, ks]
+            ab = np.linalg.norm(B - A, axis=1)
+            bc = np.linalg.norm(Cs - B, axis=1)
+            ca = np.linalg.norm(A - Cs, axis=1)
+            lo, hi = min_side_px[i], max_side_px[i]
+            ok = (np.minimum(np.minimum(ab, bc), ca) >= lo) & (np.maximum(np.maximum(ab, bc), ca) <= hi)
+            if not ok.any():
+                continue
+            centres.append((A + B[ok] + Cs[ok]) / 3.0)
+            count += int(ok.sum())
+            if count > max_triangles:
+                break
+        if count > max_triangles:
+            break
+    return np.vstack(centres) if centres else np.empty((0, 2))
+
+
+def cluster_points(xy: np.ndarray, radius_m: float, weights=None):
+    """Connected components of points closer than ``radius_m``: (labels, list of member index
+    arrays, largest first)."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if not len(xy):
+        return np.empty(0, int), []
+    pairs = cKDTree(xy).query_pairs(radius_m, output_type="ndarray")
+    from scipy.sparse import coo_matrix
+
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy), len(xy)))
+    _, lab = connected_components(g, directed=False)
+    w = np.ones(len(xy)) if weights is None else weights
+    groups = [np.nonzero(lab == k)[0] for k in np.unique(lab)]
+    groups.sort(key=lambda g_: -w[g_].sum())
+    return lab, groups
+
+
+# ----------------------------------------------------------------------------------------------
+# Scoring poses over several photos
+# ----------------------------------------------------------------------------------------------
+
+@dataclass
+class RoiDescriptor:
+    b: np.ndarray
+    table: np.ndarray
+    K: np.ndarray
+    cell_px: int
+    perfect: int  # b's value for a cell whose direction matches exactly
+
+
+def roi_descriptor(view: View, centre: np.ndarray, radius_m: float, height_m: float, cell_px: int,
+                   mode: str = "max") -> RoiDescriptor | None:
+    """The photo's descriptor b on a region of interest around a pylon standing at ``centre``
+    (local frame) ± ``radius_m``: the box of the projections of that volume, K shifted to it (the
+    method's ROI: cx, cy move). None when the volume is not in front of the camera or not in view."""
+    corners = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (0, 1)], float)
+    corners = centre + corners * [radius_m, radius_m, height_m]
+    uv, depth = view.project(corners)
+    if np.any(depth <= 1.0):
+        return None
+    x0, y0 = np.floor(np.maximum(uv.min(axis=0), 0) / cell_px).astype(int) * cell_px
+    x1, y1 = np.minimum(uv.max(axis=0), [view.width, view.height])
+    if x1 <= x0 + cell_px or y1 <= y0 + cell_px:
+        return None
+    seg = view.segments
+    inside = ((np.maximum(seg[:, 0], seg[:, 2]) >= x0) & (np.minimum(seg[:, 0], seg[:, 2]) <= x1)
+              & (np.maximum(seg[:, 1], seg[:, 3]) >= y0) & (np.minimum(seg[:, 1], seg[:, 3]) <= y1))
+    seg = seg[inside] - [x0, y0, x0, y0]
+    b, table = core.photo_descriptor(seg, (int(np.ceil(x1 - x0)), int(np.ceil(y1 - y0))), cell_px=cell_px, mode=mode)
+    K = view.K.copy()
+    K[0, 2] -= x0
+    K[1, 2] -= y0
+    w = core.direction_weights()
+    return RoiDescriptor(b, table, K, cell_px, int(w.max()))
+
+
+def score_poses(views, rois, poses: np.ndarray, a: np.ndarray, b: np.ndarray, kernel=None) -> np.ndarray:
+    """A_s of each pose (N, 6: x, y, z, heading, pitch, roll in the local frame, degrees) in each
+    photo, normalised by the score of a perfect match of the same pose (its beams' cells all on
+    photo segments of their direction): (n_views, N) in [0, 1]."""
+    out = np.zeros((len(views), len(poses)))
+    for k, (v, r) in enumerate(zip(views, rois)):
+        if r is None:
+            continue
+        P = core.pose_matrices(r.K, v.R, v.t, poses[:, 0], poses[:, 1], poses[:, 2], poses[:, 3], poses[:, 4], poses[:, 5])
+        s = core.similarity(r.b, r.table, P, a, b, r.cell_px, kernel)
+        out[k] = s / r.perfect
+    return out
+
+
+def visible_cells(roi: RoiDescriptor, view: View, pose: np.ndarray, a: np.ndarray, b: np.ndarray) -> int:
+    """Cells the model's beams cross inside the ROI at ``pose`` (the normaliser of a score)."""
+    full = np.full_like(roi.b[..., :1], 1)
+    ones = np.broadcast_to(full, roi.b.shape)
+    P = core.pose_matrices(roi.K, view.R, view.t, *pose[:4], pose[4], pose[5])
+    return int(reference.similarity(np.ascontiguousarray(ones), P, a, b, roi.cell_px, roi.table)[0])
+
+
+def grid(centre, half, step):
+    """Offsets centre ± half in steps (each parameter its own), as an (N, 6) array of poses."""
+    axes = [np.arange(-h, h + 1e-9, s) + c if h > 0 else np.array([c]) for c, h, s in zip(centre, half, step)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([m.ravel() for m in mesh])
+
+
+def weighted_median(values, weights):
+    o = np.argsort(values)
+    v, w = np.asarray(values)[o], np.asarray(weights)[o]
+    c = np.cumsum(w)
+    return float(v[np.searchsorted(c, 0.5 * c[-1])])
+
+
+def mad_merge(values, weights):
+    """The method's merge: weighted median, drop values whose absolute deviation exceeds the
+    median absolute deviation, weighted mean of the rest; (value, MAD)."""
+    values, weights = np.asarray(values, float), np.asarray(weights, float)
+    if not len(values) or weights.sum() <= 0:
+        return float("nan"), float("nan")
+    med = weighted_median(values, weights)
+    dev = np.abs(values - med)
+    mad = float(np.median(dev))
+    keep = dev <= mad + 1e-12
+    return float(np.average(values[keep], weights=weights[keep] + 1e-12)), mad
+
+
+def wrap_deg(a, period=360.0):
+    return (np.asarray(a) + period / 2) % period - period / 2
+
+
+def vote_columns(views, triangles, ground, height_m: float, cell_m: float = 2.0, min_per_photo: int = 2,
+                 samples: int = 16):
+    """Where the photos' triangle rays meet: each triangle's ray, between 15 % and 85 % of the
+    pylon's height over the terrain, marks the grid cells it crosses (once per photo per cell);
+    a cell that at least ``min_per_photo`` triangles of one photo cross is that photo's vote.
+    Returns (votes per cell, x0, y0 of the grid, cell_m): votes count photos."""
+    segs = []
+    for v, tc in zip(views, triangles):
+        if not len(tc):
+            segs.append(np.empty((0, 2, 2)))
+            continue
+        d = v.rays(tc)
+        lo = ray_terrain(v.centre, d, ground, above_m=0.85 * height_m)
+        hi = ray_terrain(v.centre, d, ground, above_m=0.15 * height_m)
+        ok = np.isfinite(lo) & np.isfinite(hi)
+        A = v.centre + lo[ok, None] * d[ok]
+        B = v.centre + hi[ok, None] * d[ok]
+        segs.append(np.stack([A[:, :2], B[:, :2]], 1))
+    allpts = np.concatenate([s.reshape(-1, 2) for s in segs]) if segs else np.empty((0, 2))
+    if not len(allpts):
+        return np.zeros((0, 0), int), 0.0, 0.0, cell_m
+    x0, y0 = allpts.min(axis=0) - cell_m
+    nx, ny = (np.ceil((allpts.max(axis=0) - [x0, y0]) / cell_m) + 2).astype(int)
+    votes = np.zeros((ny, nx), np.int32)
+    t = np.linspace(0, 1, samples)
+    for s in segs:
+        if not len(s):
+            continue
+        P = s[:, None, 0, :] + t[None, :, None] * (s[:, None, 1, :] - s[:, None, 0, :])  # (T, samples, 2)
+        ix = ((P[..., 0] - x0) / cell_m).astype(int)
+        iy = ((P[..., 1] - y0) / cell_m).astype(int)
+        cell = iy * nx + ix
+        per = np.zeros(nx * ny, np.int32)
+        for row in cell:  # each triangle once per cell
+            per[np.unique(row)] += 1
+        votes += (per.reshape(ny, nx) >= min_per_photo)
+    return votes, float(x0), float(y0), cell_m
+
+
+def column_peaks(votes, x0, y0, cell_m, min_photos: int = 3, separation_m: float = 15.0):
+    """Cells with votes ≥ ``min_photos`` that are the maximum within ``separation_m``: (K, 3) x,
+    y (cell centres) and votes, strongest first."""
+    from scipy import ndimage
+
+    if not votes.size:
+        return np.empty((0, 3))
+    sm = ndimage.uniform_filter(votes.astype(float), 3)
+    r = max(int(round(separation_m / cell_m)), 1)
+    mx = ndimage.maximum_filter(sm, size=2 * r + 1)
+    iy, ix = np.nonzero((sm == mx) & (votes >= min_photos) & (sm > 0))
+    out = np.column_stack([x0 + (ix + 0.5) * cell_m, y0 + (iy + 0.5) * cell_m, votes[iy, ix]])
+    return out[np.argsort(-out[:, 2], kind="stable")]
+
+
+@dataclass
+class PoseResult:
+    pose: np.ndarray  # x, y, z (local frame), heading, pitch, roll (degrees)
+    score: float  # mean normalised A_s over the photos
+    mad: np.ndarray  # MADs of x, y, z (m) and heading (deg) from the per-photo merge
+    n_photos: int
+    per_photo: np.ndarray  # normalised score in each photo used
+
+
+def _rois(views, centre, radius_m, height_m, cell_px, mode):
+    rois = [roi_descriptor(v, centre, radius_m, height_m, cell_px, mode) for v in views]
+    keep = [k for k, r in enumerate(rois) if r is not None]
+    return [views[k] for k in keep], [rois[k] for k in keep]
+
+
+def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, period=360.0):
+    order = np.argsort(-scores)
+    out = []
+    for i in order:
+        p = poses[i]
+        if all(np.hypot(*(p[:2] - q[:2])) > min_dist_m or abs(wrap_deg(p[3] - q[3], period)) > min_heading_deg
+               for q in out):
+            out.append(p)
+        if len(out) == n:
+            break
+    return out
+
+
+def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
+              radius_m: float = 8.0, mode: str = "max", iterations: int = 2, progress=None) -> PoseResult | None:
+    """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m:
+    a coarse exhaustive search (x, y, heading on the terrain, upright; 32 px cells), a finer one
+    around the best candidates (8 px), then the method's MatchSeparate on 4 px cells: in each
+    photo the best rotation, then the best translation, on grids within the current MADs, merged
+    across photos by MAD-weighted medians; last a joint search (summed over photos) within them."""
+    extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
+    period = min(symmetry_deg, 360.0)
+    step = (lambda *_: None) if progress is None else progress
+    # A: coarse, everything the rough position allows
+    c0 = np.array([rough_xy[0], rough_xy[1], float(ground(np.array([rough_xy[0]]), np.array([rough_xy[1]]))[0])])
+    vA, rA = _rois(views, c0, radius_m + extent, height_m, 32, mode)
+    if len(vA) < 2:
+        return None
+    poses = grid([c0[0], c0[1], 0.0, period / 2, 0, 0], [radius_m, radius_m, 0, period / 2, 0, 0], [1.0, 1.0, 1, 3.0, 1, 1])
+    poses = poses[poses[:, 3] < period - 1e-9]
+    poses[:, 2] = ground(poses[:, 0], poses[:, 1])
+    sA = score_poses(vA, rA, poses, a, b, kernel).sum(axis=0)
+    step("coarse")
+    seeds = _best_distinct(poses, sA, 3, period=period)
+    # B: 8 px cells around the best few
+    vB, rB = _rois(views, c0, radius_m + extent + 2.0, height_m, 8, mode)
+    best, best_s = None, -1.0
+    for s in seeds:
+        cand = grid(s, [1.5, 1.5, 0.5, 4.0, 0, 0], [0.25, 0.25, 0.25, 1.0, 1, 1])
+        sc = score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)
+        i = int(np.argmax(sc))
+        if sc[i] > best_s:
+            best, best_s = cand[i].copy(), float(sc[i])
+    step("fine")
+    # C: MatchSeparate on 4 px cells, per photo, merged
+    vC, rC = _rois(views, best[:3], extent + 1.5, height_m, 4, mode)
+    mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
+    pose = best.copy()
+    rays = np.array([pose[:3] + [0, 0, height_m / 2] - v.centre for v in vC])
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    for _ in range(iterations):
+        rot = grid(pose, [0, 0, 0, max(mad[3], 0.5), max(mad[4], 0.1), max(mad[5], 0.1)], [1, 1, 1, 0.25, 0.1, 0.1])
+        sc = score_poses(vC, rC, rot, a, b, kernel)
+        best_k = rot[np.argmax(sc, axis=1)]
+        w = sc.max(axis=1)
+        merged = [mad_merge(wrap_deg(best_k[:, 3] - pose[3], period) + pose[3], w)]
+        merged += [mad_merge(best_k[:, k], w) for k in (4, 5)]
+        pose[3], pose[4], pose[5] = merged[0][0], merged[1][0], merged[2][0]
+        mad[3:] = [m[1] for m in merged]
+        tr = grid(pose, [max(mad[0], 0.3), max(mad[1], 0.3), max(mad[2], 0.3), 0, 0, 0], [0.1, 0.1, 0.1, 1, 1, 1])
+        sc = score_poses(vC, rC, tr, a, b, kernel)
+        best_k = tr[np.argmax(sc, axis=1)]
+        w = sc.max(axis=1)
+        for k in range(3):  # weight: similarity x sin(angle between the ray and the axis)
+            wk = w * np.sqrt(np.clip(1 - rays[:, k] ** 2, 0, 1))
+            pose[k], mad[k] = mad_merge(best_k[:, k], wk)
+        if np.all(mad[:3] <= 0.3) and mad[3] <= 1.0:
+            break
+    step("separate")
+    # D: joint refinement within the MADs (translation, then rotation, twice)
+    for _ in range(2):
+        tr = grid(pose, [min(max(mad[0], 0.1), 0.4), min(max(mad[1], 0.1), 0.4), min(max(mad[2], 0.1), 0.4), 0, 0, 0],
+                  [0.05, 0.05, 0.05, 1, 1, 1])
+        sc = score_poses(vC, rC, tr, a, b, kernel).sum(axis=0)
+        pose = tr[int(np.argmax(sc))].copy()
+        rot = grid(pose, [0, 0, 0, min(max(mad[3], 0.25), 1.0), 0.1, 0.1], [1, 1, 1, 0.125, 0.05, 0.05])
+        sc = score_poses(vC, rC, rot, a, b, kernel).sum(axis=0)
+        pose = rot[int(np.argmax(sc))].copy()
+    per = score_poses(vC, rC, pose[None], a, b, kernel)[:, 0]
+    norm = np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(vC, rC)])
+    per = per * rC[0].perfect / (norm * rC[0].perfect)
+    pose[3] = pose[3] % period
+    step("joint")
+    return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per)
