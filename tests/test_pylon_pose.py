@@ -130,3 +130,149 @@ def test_taichi_similarity_equals_the_reference_and_the_true_pose_scores_best():
     got = TaichiSimilarity(taichi())(b, P, A, B, 8, table)
     np.testing.assert_array_equal(got, ref)
     assert ref[1] == 0 and np.argmax(ref) == 0 and ref[0] > 1.2 * np.sort(ref)[-2]
+
+
+# ----------------------------------------------------------------------------------------------
+# The photo survey generator and the pylon-pose algorithm, end to end
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    from toolbox.runner import run_algorithm
+
+    d = tmp_path_factory.mktemp("pylon_survey")
+    run_algorithm("synthetic-scene", [], d, {"kind": "pylons", "seed": 5, "n_pylons": 2, "photos_per_pylon": 8})
+    return d
+
+
+def test_survey_has_what_a_photogrammetry_user_has(survey):
+    import json
+
+    import cv2
+
+    from toolbox.io.cameras import read_metashape_xml
+    from toolbox.io.wireframes import read_wireframes, rotational_symmetry_deg
+
+    photos = sorted((survey / "photos").glob("*.JPG"))
+    assert len(photos) == 16 and cv2.imread(str(photos[0])).shape == (1600, 2400, 3)
+    truth = json.loads((survey / "points_truth.json").read_text())
+    assert {p["model"] for p in truth["pylons"]} == {"vl220", "u110"}
+    cams, imgs = read_colmap_text(survey / "colmap")
+    mcams, mimgs = read_metashape_xml(survey / "cameras.xml", "EPSG:25832")
+    by_name = {i.name: i for i in mimgs.values()}
+    for i in imgs.values():  # the Metashape XML holds the same cameras (through a geocentric chunk frame)
+        np.testing.assert_allclose(by_name[i.name].centre, i.centre, atol=1e-3)
+        np.testing.assert_allclose(by_name[i.name].R, i.R, atol=1e-7)
+    np.testing.assert_allclose(mcams[0].K, cams[1].K)
+    np.testing.assert_allclose(mcams[0].distortion[:5], cams[1].distortion[:5])
+    lib = read_wireframes(survey / "models")
+    assert rotational_symmetry_deg(*lib["vl220"]) == 180.0 and rotational_symmetry_deg(*lib["u110"]) == 360.0
+    # every truth pylon's base projects into the photos taken of it
+    for ph in truth["photos"]:
+        p = truth["pylons"][ph["pylon"]]
+        im = next(i for i in imgs.values() if i.name == ph["name"])
+        uv = cams[1].project(im.world_to_camera([[p["x"], p["y"], p["z"]]]))[0]
+        assert 0 < uv[0] < 2400 and 0 < uv[1] < 1600
+
+
+def test_pylon_pose_finds_both_types_from_a_metashape_xml(survey):
+    import json
+
+    import geopandas as gpd
+
+    from toolbox.runner import run_algorithm
+
+    out = survey / "found.gpkg"
+    rep = run_algorithm("pylon-pose", {"photos": str(survey / "photos"), "cameras": str(survey / "cameras.xml"),
+                                       "dem": str(survey / "points_dem.tif")}, out)
+    truth = json.loads((survey / "points_truth.json").read_text())["pylons"]
+    got = gpd.read_file(out, layer="pylons")
+    assert len(got) == len(truth) == rep["stats"]["n_pylons"]  # every pylon, no false one
+    assert len(gpd.read_file(out, layer="pylon_footprints")) == len(truth)
+    for p in truth:
+        d = np.hypot(got.geometry.x - p["x"], got.geometry.y - p["y"])
+        r = got.iloc[int(np.argmin(d))]
+        sym = p["symmetry_deg"]
+        assert r.model == p["model"]
+        # measured on this seed: 0.1-0.2 m and < 0.5 deg; the issue's 0.15 m / 0.5 deg / 0.1 deg tilt
+        # are not met on every seed yet (see the README), so this guards against regressions only
+        assert d.min() < 0.3 and abs(r.geometry.z - p["z"]) < 0.3
+        assert abs((r.heading_deg - p["heading_deg"] + sym / 2) % sym - sym / 2) < 1.0  # never 90 or 180 off
+        assert abs(r.pitch_deg - p["pitch_deg"]) < 0.6 and abs(r.roll_deg - p["roll_deg"]) < 0.6
+
+
+def test_pylon_pose_bad_input_is_one_line_and_writes_nothing(survey, tmp_path):
+    import shutil
+
+    from toolbox.errors import DataError
+    from toolbox.io.rasters import read_raster, write_raster
+    from toolbox.runner import run_algorithm
+
+    def run(**over):
+        inputs = {"photos": str(survey / "photos"), "cameras": str(survey / "colmap"), "dem": str(survey / "points_dem.tif")}
+        inputs.update(over)
+        out = tmp_path / "p.gpkg"
+        with pytest.raises(DataError) as e:
+            run_algorithm("pylon-pose", inputs, out)
+        assert "\n" not in str(e.value) and not out.exists()
+        return str(e.value)
+
+    few = tmp_path / "few"
+    few.mkdir()
+    shutil.copy(survey / "photos" / "IMG_0001.JPG", few)
+    assert "'IMG_0002.JPG' of the cameras is missing" in run(photos=str(few))
+    small = tmp_path / "small"
+    small.mkdir()
+    for p in (survey / "photos").glob("*.JPG"):
+        cv2 = pytest.importorskip("cv2")
+        cv2.imwrite(str(small / p.name), cv2.imread(str(p))[:800, :1200])
+    assert "is 1200 x 800 px but its camera 1 is 2400 x 1600" in run(photos=str(small))
+    (tmp_path / "empty.obj").write_text("v 0 0 0\nv 0 0 30\n")
+    assert "has no beams" in run(model=str(tmp_path / "empty.obj"))
+    dem = read_raster(survey / "points_dem.tif")
+    from affine import Affine
+
+    t = dem.transform
+    far = type(dem)(dem.data[:50, :50], Affine(t.a, 0, t.c + 5000, 0, t.e, t.f), crs=dem.crs, nodata=dem.nodata)
+    write_raster(far, tmp_path / "far.tif")
+    assert "the DEM does not cover the view of photo" in run(dem=str(tmp_path / "far.tif"))
+
+
+def test_named_inputs_fill_before_positional_ones():
+    from toolbox.errors import UsageError
+    from toolbox.registry import registry
+    from toolbox.runner import assign_inputs
+
+    alg = registry().get("pylon-pose")
+    got = assign_inputs(alg, ["ph", "d.tif"], {"cameras": "c.xml"})
+    assert got == {"cameras": "c.xml", "photos": "ph", "dem": "d.tif"}
+    with pytest.raises(UsageError, match="has no input 'camera'"):
+        assign_inputs(alg, [], {"camera": "c.xml"})
+    with pytest.raises(UsageError, match="expects a raster for 'dem'"):
+        assign_inputs(alg, ["ph", "c.xml", "d.laz"])
+
+
+def test_folder_output_leaves_nothing_when_a_file_fails(tmp_path):
+    from toolbox.io.atomic import write_folder
+
+    with pytest.raises(TypeError):
+        write_folder({"a.txt": "x", "sub/b.txt": b"y", "sub/c.txt": object()}, tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    assert sorted(write_folder({"a.txt": "x", "sub/b.txt": b"y"}, tmp_path)) == ["a.txt", "sub"]
+    assert (tmp_path / "sub" / "b.txt").read_bytes() == b"y"
+    with pytest.raises(Exception, match="exists; pass --overwrite"):
+        write_folder({"sub/b.txt": b"z"}, tmp_path)
+
+
+def test_ray_terrain_and_mad_merge():
+    from toolbox_plugins.pylon_pose import search
+
+    ground = lambda x, y: 0.1 * x + 5.0  # noqa: E731 - a 10 % slope
+    C = np.array([0.0, 0.0, 100.0])
+    d = np.array([[0.6, 0.0, -0.8], [0.0, 0.6, -0.8], [0.0, 0.0, 1.0]])
+    a = search.ray_terrain(C, d, ground, above_m=15.0)
+    P = C + a[:2, None] * d[:2]
+    np.testing.assert_allclose(P[:, 2], ground(P[:, 0], P[:, 1]) + 15.0, atol=1e-6)
+    assert np.isnan(a[2])  # pointing up: never
+    v, mad = search.mad_merge([1.0, 1.1, 0.9, 1.05, 7.0], [1, 1, 1, 1, 1])
+    assert abs(v - 1.0) < 0.06 and mad < 0.2  # the outlier is dropped

@@ -88,17 +88,20 @@ def _run(inputs, params, ctx):
     def ground(x, y):
         return dem.sample(np.asarray(x) + origin[0], np.asarray(y) + origin[1])
 
-    views = _views(inputs["photos"], cameras, images, origin, ctx)
     t = dem.transform
     rows, cols = dem.shape
     x0, x1 = t.c - origin[0], t.c + t.a * cols - origin[0]
     y1, y0 = t.f - origin[1], t.f + t.e * rows - origin[1]
-    for v in views:
-        c = search.ray_terrain(v.centre, v.rays(v.K[:2, 2][None]), ground)
-        p = v.centre + c[0] * v.rays(v.K[:2, 2][None])[0] if np.isfinite(c[0]) else None
+    for im in sorted(images.values(), key=lambda i: i.name):  # before any photo is read
+        K = cameras[im.camera_id].K
+        v = search.View(im.name, K, im.R, np.asarray(im.tvec, float) + im.R @ origin, 0, 0, np.empty((0, 4)))
+        d = v.rays(K[:2, 2][None])
+        c = search.ray_terrain(v.centre, d, ground)[0]
+        p = v.centre + c * d[0] if np.isfinite(c) else None
         if p is None or not (x0 <= p[0] <= x1 and y0 <= p[1] <= y1):
-            raise DataError(f"the DEM does not cover the view of photo {v.name!r} (its centre ray meets no terrain inside "
+            raise DataError(f"the DEM does not cover the view of photo {im.name!r} (its centre ray meets no terrain inside "
                             "the DEM); give a DEM of the whole surveyed area in the cameras' CRS")
+    views = _views(inputs["photos"], cameras, images, origin, ctx)
     height = max(m[2] for m in models.values())
     kernel = TaichiSimilarity(taichi())
     stats = {"n_photos": len(views), "model_types": sorted(models), "search_radius_m": params["radius_m"]}
@@ -115,20 +118,31 @@ def _run(inputs, params, ctx):
             alpha = search.ray_terrain(v.centre, v.rays(0.5 * (seg[:, :2] + seg[:, 2:])), ground, above_m=height / 2)
             ok = np.isfinite(alpha)
             f = v.K[0, 0]
-            tris.append(search.photo_triangles(seg[ok], 0.5 * smin * f / alpha[ok], 2 * smax * f / alpha[ok]))
-        votes, gx, gy, cell = search.vote_columns(views, tris, ground, height, min_per_photo=params["min_triangles"])
+            if params["detector"] == "triangles":
+                tris.append(search.photo_triangles(seg[ok], 0.5 * smin * f / alpha[ok], 2 * smax * f / alpha[ok]))
+            else:
+                tris.append(search.photo_corners(seg[ok], 2 * smax * f / alpha[ok]))
+        per_photo = params["min_per_photo"] or (1 if params["detector"] == "triangles" else 3)
+        votes, gx, gy, cell = search.vote_columns(views, tris, ground, height, min_per_photo=per_photo)
         rough = search.column_peaks(votes, gx, gy, cell, min_photos=params["min_photos"])
+        # a pylon's joints vote from nearly every photo that sees it; wires and clutter from some
+        seen = np.array([search.seen_by(views, r[:2], ground, height) for r in rough])
+        rough = rough[rough[:, 2] >= params["min_vote_share"] * np.maximum(seen, 1)]
         stats.update(model_triangle_side_m=[round(smin, 3), round(smax, 3)],
-                     n_triangles=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
-    found = []
+                     detector=params["detector"], min_per_photo=per_photo,
+                     n_features=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
+    found, cand_scores = [], []
     for xy in ctx.progress(list(rough), desc="pose search", unit="pylon"):
         best = None
         for name, (a, b, h, sym) in models.items():
-            r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"])
+            r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
+                                 min_score=params["min_score"])
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
-        if best is not None and best[1].score >= params["min_score"]:
+        cand_scores.append(best[1].score if best is not None else 0.0)
+        if best is not None and best[1].score >= params["min_score"] and np.isfinite(best[1].mad).all():
             found.append(best)
+    stats["candidate_scores"] = [round(c, 3) for c in cand_scores]
     stats["n_pylons"] = len(found)
     stats["scores"] = [round(r.score, 3) for _, r in found]
     layers = _layers(found, models, origin, dem.crs)
@@ -215,7 +229,8 @@ def toolbox_algorithms():
         run=_run,
         description=(
             "Finds lattice pylons in aligned photos and estimates each one's pose (x, y, z of the base centre, "
-            "heading, pitch, roll): LSD line segments per photo, triangles of segments, their rays voted into "
+            "heading, pitch, roll): LSD line segments per photo, the lattice's joints (or the method's triangles) "
+            "among them, their rays voted into "
             "terrain columns (a pylon where at least min_photos photos agree), then a render-and-compare search of "
             "the pylon model's beams against each photo's segments (the similarity A_s, a taichi kernel): coarse "
             "exhaustive, finer, the method's MatchSeparate with MAD-weighted merging across photos, and a joint "
@@ -230,8 +245,13 @@ def toolbox_algorithms():
                       minimum=1.0, maximum=50.0),
             Parameter("min_photos", int, 3, "detection: photos whose triangle rays must meet in one terrain column "
                       "(the method's tau_c)", minimum=2, maximum=100),
-            Parameter("min_triangles", int, 1, "detection: triangles of one photo that make its vote for a column",
-                      minimum=1, maximum=100),
+            Parameter("detector", str, "corners", "detection features: corners (meeting points of short segments, "
+                      "the lattice's joints) or triangles (the method's: three segments meeting pairwise; few per "
+                      "pylon on our photos)", choices=("corners", "triangles")),
+            Parameter("min_per_photo", int, None, "detection: features of one photo whose rays must cross a column "
+                      "for that photo's vote (auto: 3 corners, 1 triangle)", minimum=1, maximum=100, allow_auto=True),
+            Parameter("min_vote_share", float, 0.6, "detection: share of the photos that see a column which must "
+                      "vote for it", minimum=0.0, maximum=1.0),
             Parameter("min_score", float, 0.05, "share of the model's beam cells that must match photo segments "
                       "of their direction at the found pose; below it a candidate is no pylon", minimum=0.0, maximum=1.0),
             Parameter("mode", str, "max", "direction smoothing of the photo descriptor: max (the thesis's text) or "

@@ -346,7 +346,8 @@ def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, perio
 
 
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
-              radius_m: float = 8.0, mode: str = "max", iterations: int = 2, progress=None) -> PoseResult | None:
+              radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
+              progress=None) -> PoseResult | None:
     """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m:
     a coarse exhaustive search (x, y, heading on the terrain, upright; 32 px cells), a finer one
     around the best candidates (8 px), then the method's MatchSeparate on 4 px cells: in each
@@ -357,10 +358,11 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     step = (lambda *_: None) if progress is None else progress
     # A: coarse, everything the rough position allows
     c0 = np.array([rough_xy[0], rough_xy[1], float(ground(np.array([rough_xy[0]]), np.array([rough_xy[1]]))[0])])
+    views = [v for v in views if seen_by([v], c0[:2], ground, height_m)]  # the photos it is in
     vA, rA = _rois(views, c0, radius_m + extent, height_m, 32, mode)
     if len(vA) < 2:
         return None
-    poses = grid([c0[0], c0[1], 0.0, period / 2, 0, 0], [radius_m, radius_m, 0, period / 2, 0, 0], [1.0, 1.0, 1, 3.0, 1, 1])
+    poses = grid([c0[0], c0[1], 0.0, period / 2, 0, 0], [radius_m, radius_m, 0, period / 2, 0, 0], [1.5, 1.5, 1, 5.0, 1, 1])
     poses = poses[poses[:, 3] < period - 1e-9]
     poses[:, 2] = ground(poses[:, 0], poses[:, 1])
     sA = score_poses(vA, rA, poses, a, b, kernel).sum(axis=0)
@@ -376,6 +378,10 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         if sc[i] > best_s:
             best, best_s = cand[i].copy(), float(sc[i])
     step("fine")
+    per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
+    norm = np.array([max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)])
+    if float(np.mean(per / norm)) < min_score:  # no pylon of this type here: skip the fine stages
+        return PoseResult(best, float(np.mean(per / norm)), np.full(4, np.nan), len(vB), per / norm)
     # C: MatchSeparate on 4 px cells, per photo, merged
     vC, rC = _rois(views, best[:3], extent + 1.5, height_m, 4, mode)
     mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
@@ -416,3 +422,42 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     pose[3] = pose[3] % period
     step("joint")
     return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per)
+
+
+def photo_corners(seg: np.ndarray, max_length_px: np.ndarray, extend: float = 1.5, min_angle_deg: float = 15.0) -> np.ndarray:
+    """Meeting points (C, 2) of the photo's segments no longer than ``max_length_px`` (each its
+    own limit: the model's longest triangle side x 2 at its depth), extended ``extend`` times about
+    their middle, at ≥ ``min_angle_deg``: the lattice's joints. Many more per pylon than the
+    method's triangles (which need three segments meeting pairwise)."""
+    L = np.hypot(*(seg[:, 2:] - seg[:, :2]).T)
+    seg = seg[L <= max_length_px]
+    if len(seg) < 2:
+        return np.empty((0, 2))
+    m = 0.5 * (seg[:, :2] + seg[:, 2:])
+    h = 0.5 * extend * (seg[:, 2:] - seg[:, :2])
+    p0, d = m - h, 2 * h
+    out = []
+    for s0 in range(0, len(seg), 1024):  # blocks of rows keep the pair arrays small
+        sl = slice(s0, s0 + 1024)
+        cross = d[sl, None, 0] * d[None, :, 1] - d[sl, None, 1] * d[None, :, 0]
+        w = p0[None, :, :] - p0[sl, None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / cross
+            u = (w[..., 0] * d[sl, None, 1] - w[..., 1] * d[sl, None, 0]) / cross
+        Ln = np.linalg.norm(d, axis=1)
+        sin = np.abs(cross) / (Ln[sl, None] * Ln[None, :])
+        ok = (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1) & (sin >= np.sin(np.radians(min_angle_deg)))
+        ok &= np.arange(len(seg))[None, :] > np.arange(len(seg))[sl, None]
+        i, j = np.nonzero(ok)
+        out.append(p0[sl][i] + s[i, j, None] * d[sl][i])
+    return np.vstack(out)
+
+
+def seen_by(views, xy, ground, height_m: float) -> int:
+    """Photos in whose frame a pylon standing at ``xy`` (its middle) appears."""
+    X = np.array([xy[0], xy[1], float(ground(np.array([xy[0]]), np.array([xy[1]]))[0]) + height_m / 2])
+    n = 0
+    for v in views:
+        uv, z = v.project(X)
+        n += bool(z[0] > 0 and 0 <= uv[0, 0] < v.width and 0 <= uv[0, 1] < v.height)
+    return n
