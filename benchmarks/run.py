@@ -941,9 +941,10 @@ def main(argv=None) -> int:
         if "survey" in want:
             rows += bench_survey(tmp, quick=args.quick or args.no_10m)
         if "pylon" in want:
-            from pylon_bench import bench_pylon
+            from pylon_bench import bench_pylon, bench_search
 
             rows += bench_pylon()
+            rows += bench_search()
     check_end = machine_check()
     print_machine_check("end", check_end)
     rows.append({"case": "machine check", "start": check_start, "end": check_end})
