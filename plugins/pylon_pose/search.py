@@ -69,9 +69,8 @@ def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     shared end or a crossing), sides between their meeting points."""
     n = len(a)
     P = np.full((n, n, 3), np.nan)
-    d1, d2 = b - a, None
+    d1 = d2 = b - a
     for i in range(n):
-        d2 = b - a
         r = a[i] - a
         aa = d1[i] @ d1[i]
         ee = np.einsum("ij,ij->i", d2, d2)
@@ -105,6 +104,24 @@ def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(sides.min()), float(sides.max())
 
 
+def _crossings(seg: np.ndarray, extend: float, min_angle_deg: float, rows=slice(None)):
+    """Pairwise crossings of the segments extended ``extend`` times about their middle, at ≥
+    ``min_angle_deg``: (adjacency (rows x n), crossing points (rows x n x 2))."""
+    m = 0.5 * (seg[:, :2] + seg[:, 2:])
+    h = 0.5 * extend * (seg[:, 2:] - seg[:, :2])
+    p0, d = m - h, 2 * h
+    cross = d[rows, None, 0] * d[None, :, 1] - d[rows, None, 1] * d[None, :, 0]
+    w = p0[None, :, :] - p0[rows, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / cross
+        u = (w[..., 0] * d[rows, None, 1] - w[..., 1] * d[rows, None, 0]) / cross
+    L = np.linalg.norm(d, axis=1)
+    sin = np.abs(cross) / (L[rows, None] * L[None, :])
+    adj = (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1) & (sin >= np.sin(np.radians(min_angle_deg)))
+    X = p0[rows, None, :] + np.where(adj, s, 0)[..., None] * d[rows, None, :]
+    return adj, X
+
+
 def photo_triangles(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.ndarray, extend: float = 1.5,
                     min_angle_deg: float = 15.0, max_triangles: int = 200_000) -> np.ndarray:
     """Centres (T, 2) of the photo's triangles: segments extended ``extend`` times about their
@@ -113,20 +130,9 @@ def photo_triangles(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.nd
     turned into pixels at the segment's depth) and no angle under ``min_angle_deg``."""
     if len(seg) < 3:
         return np.empty((0, 2))
-    m = 0.5 * (seg[:, :2] + seg[:, 2:])
-    h = 0.5 * extend * (seg[:, 2:] - seg[:, :2])
-    p0, d = m - h, 2 * h
     n = len(seg)
-    cross = d[:, None, 0] * d[None, :, 1] - d[:, None, 1] * d[None, :, 0]
-    w = p0[None, :, :] - p0[:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / cross
-        u = (w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]) / cross
-    L = np.linalg.norm(d, axis=1)
-    sin = np.abs(cross) / (L[:, None] * L[None, :])
-    adj = (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1) & (sin >= np.sin(np.radians(min_angle_deg)))
+    adj, X = _crossings(seg, extend, min_angle_deg)
     np.fill_diagonal(adj, False)
-    X = p0[:, None, :] + np.where(adj, s, 0)[..., None] * d[:, None, :]  # intersection points
     centres = []
     count = 0
     for i in range(n):
@@ -418,7 +424,7 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         pose = rot[int(np.argmax(sc))].copy()
     per = score_poses(vC, rC, pose[None], a, b, kernel)[:, 0]
     norm = np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(vC, rC)])
-    per = per * rC[0].perfect / (norm * rC[0].perfect)
+    per = per / norm
     pose[3] = pose[3] % period
     step("joint")
     return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per)
@@ -433,23 +439,11 @@ def photo_corners(seg: np.ndarray, max_length_px: np.ndarray, extend: float = 1.
     seg = seg[L <= max_length_px]
     if len(seg) < 2:
         return np.empty((0, 2))
-    m = 0.5 * (seg[:, :2] + seg[:, 2:])
-    h = 0.5 * extend * (seg[:, 2:] - seg[:, :2])
-    p0, d = m - h, 2 * h
     out = []
     for s0 in range(0, len(seg), 1024):  # blocks of rows keep the pair arrays small
-        sl = slice(s0, s0 + 1024)
-        cross = d[sl, None, 0] * d[None, :, 1] - d[sl, None, 1] * d[None, :, 0]
-        w = p0[None, :, :] - p0[sl, None, :]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (w[..., 0] * d[None, :, 1] - w[..., 1] * d[None, :, 0]) / cross
-            u = (w[..., 0] * d[sl, None, 1] - w[..., 1] * d[sl, None, 0]) / cross
-        Ln = np.linalg.norm(d, axis=1)
-        sin = np.abs(cross) / (Ln[sl, None] * Ln[None, :])
-        ok = (s >= 0) & (s <= 1) & (u >= 0) & (u <= 1) & (sin >= np.sin(np.radians(min_angle_deg)))
-        ok &= np.arange(len(seg))[None, :] > np.arange(len(seg))[sl, None]
-        i, j = np.nonzero(ok)
-        out.append(p0[sl][i] + s[i, j, None] * d[sl][i])
+        adj, X = _crossings(seg, extend, min_angle_deg, slice(s0, s0 + 1024))
+        adj &= np.arange(len(seg))[None, :] > np.arange(s0, s0 + adj.shape[0])[:, None]
+        out.append(X[adj])
     return np.vstack(out)
 
 

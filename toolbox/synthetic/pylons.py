@@ -357,7 +357,19 @@ def _ray_ground(s: PhotoSurvey, C, d, iterations=8):
     return x, y
 
 
-def render_photo(s: PhotoSurvey, shot: Shot, ortho: np.ndarray, rng, jpeg_quality: int = 88) -> bytes:
+def lens_map(s: PhotoSurvey):
+    """For every photo pixel, where it lies in the ideal pinhole image (the camera's distortion
+    inverted): the remap tables of ``render_photo``, the same for every photo of the survey."""
+    import cv2
+
+    w, h = s.camera[0], s.camera[1]
+    K = s.K()
+    jj, ii = np.meshgrid(np.arange(w, dtype=np.float32) + 0.5, np.arange(h, dtype=np.float32) + 0.5)
+    und = cv2.undistortPoints(np.stack([jj, ii], -1).reshape(-1, 1, 2), K, s.distortion(), P=K).reshape(h, w, 2)
+    return und[..., 0].copy(), und[..., 1].copy()
+
+
+def render_photo(s: PhotoSurvey, shot: Shot, ortho: np.ndarray, rng, jpeg_quality: int = 88, lens=None) -> bytes:
     """One JPEG photo: ground texture by ray casting on the terrain, the pylons' shadows, the wires
     and the pylons' beams drawn in an ideal pinhole image, then the lens's distortion, blur, noise
     and JPEG compression."""
@@ -435,10 +447,9 @@ def render_photo(s: PhotoSurvey, shot: Shot, ortho: np.ndarray, rng, jpeg_qualit
         draw(alpha, colour, A, B, m.width_m * Kp[0, 0] / depth, np.column_stack([tone, tone, tone - 6]), 0.95)
     img = compose(img, alpha, colour)
     # the lens: each photo pixel takes the ideal image at its undistorted position
-    jj, ii = np.meshgrid(np.arange(w, dtype=np.float32) + 0.5, np.arange(h, dtype=np.float32) + 0.5)
-    und = cv2.undistortPoints(np.stack([jj, ii], -1).reshape(-1, 1, 2), K, s.distortion(), P=K).reshape(h, w, 2)
-    mx = (und[..., 0] + pad - 0.5).astype(np.float32)
-    my = (und[..., 1] + pad - 0.5).astype(np.float32)
+    ux, uy = lens if lens is not None else lens_map(s)
+    mx = (ux + pad - 0.5).astype(np.float32)
+    my = (uy + pad - 0.5).astype(np.float32)
     photo = cv2.remap(img, mx, my, cv2.INTER_LINEAR)
     photo = cv2.GaussianBlur(photo, (0, 0), 0.7)
     photo = photo + rng.normal(0, 3.0, photo.shape[:2] + (1,)).astype(np.float32)
@@ -472,7 +483,9 @@ def survey_files(s: PhotoSurvey, progress=lambda it, **kw: it, workers: int = 2)
     images = {k + 1: Image(k + 1, sh.name, 1, quaternion_from_matrix(sh.R), sh.t) for k, sh in enumerate(s.shots)}
     files: dict = {}
     with ThreadPoolExecutor(max_workers=workers) as pool:  # OpenCV's remap and drawing run without the GIL
-        futs = [pool.submit(render_photo, s, sh, ortho, np.random.default_rng(sd)) for sh, sd in zip(s.shots, seeds)]
+        lens = lens_map(s)
+        futs = [pool.submit(render_photo, s, sh, ortho, np.random.default_rng(sd), lens=lens)
+                for sh, sd in zip(s.shots, seeds)]
         for sh, fut in zip(s.shots, progress(futs, total=len(futs), desc="photos", unit="photo")):
             files[f"photos/{sh.name}"] = fut.result()
     with tempfile.TemporaryDirectory() as tmp:
