@@ -380,7 +380,7 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
                   min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
-                  ground_z=None, peel: bool = True):
+                  ground_z=None, peel: bool = True, min_piece: float | None = None):
     """Wires and their catenary spans along each 2D line.
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points; ``ground_z``: the
@@ -392,9 +392,15 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     structure, a tile's stub) does not take the points of a long line it would meet if it were
     extended. Once a line's catenaries are fitted, its points within their tolerance are wire
     points even where their piece was too small to fit on its own.
+
+    ``min_span`` is the granularity of the cuts at attachment points; a piece of wire between
+    cuts or occlusions is fitted when at least ``min_piece`` long (default ``min_span / 2``): a
+    span's end at a tower, a wire seen in stretches from a street.
     """
     if reach is None:
         reach = band
+    if min_piece is None:
+        min_piece = min_span / 2
     spans: list[Span] = []
     line_of = np.full(len(px), -1, np.int64)
     wire_of_point = np.full(len(px), -1, np.int64)
@@ -434,7 +440,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         next_wire = int(wire_of.max()) + 1 if len(wire_of) else 0
         for k in np.flatnonzero(wire_of >= 0):
             m = lab == k
-            if s[m].max() - s[m].min() < min_span:
+            if s[m].max() - s[m].min() < min_piece:
                 continue
             wire = int(wire_of[k])
             sk, zk, ik, ok_ = s[m], z[m], cand[m], off[m]
@@ -456,7 +462,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             while pieces:
                 lo_s, hi_s = pieces.pop(0)
                 sel = (sk >= lo_s) & (sk < hi_s)
-                if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_span:
+                if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_piece:
                     continue
                 fit = fit_catenary(sk[sel], zk[sel])
                 if fit[3] > max_rms and peel:
@@ -923,6 +929,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             if n_past >= n_ends:
                 continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
+        # a tower reaches the wires it carries (where they sit on its top, its top points are wire points)
+        height = max(height, float(np.max(span_end_hag[owner == k])))
         standing = structure & (top >= 0.5 * height)  # legs and body reach up to the head; bushes do not
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
         found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,

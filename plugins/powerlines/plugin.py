@@ -92,8 +92,9 @@ def _run(inputs, params, ctx):
         s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
         ground_z=(pc.z[keep] * vu - hag[keep]))
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
-    # and hangs gently (pylon members and roof edges are straight in plan but not wires)
-    good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and
+    # and hangs gently (pylon members and roof edges are straight in plan but not wires); shorter
+    # pieces only add wire points to a conductor that has one
+    good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"] and
             abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
     if params["validate_3d"]:
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
