@@ -108,6 +108,14 @@ def _run(inputs, params, ctx):
     on = steep_line >= 0
     keep = np.r_[keep, steep_idx[on]]
     line_of, wire_of_pt = np.r_[line_of, steep_line[on]], np.r_[wire_of_pt, steep_wire[on]]
+    # and those it left out as flat or rough that lie right on one (within 0.1 m in plan): where
+    # a ribbon's phases or a crown beside the wire shared their neighbourhood
+    other = idx[~linear & ~steep]
+    o_line, o_wire = points_on_spans(spans, geo, pc.x[other] * hu, pc.y[other] * hu, pc.z[other] * vu,
+                                     params["max_rms_3d_m"], lateral_m=0.1)
+    on = o_line >= 0
+    keep = np.r_[keep, other[on]]
+    line_of, wire_of_pt = np.r_[line_of, o_line[on]], np.r_[wire_of_pt, o_wire[on]]
 
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
     # footprint is one of its arms, not a conductor
