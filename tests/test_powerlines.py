@@ -482,7 +482,8 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.92
+    # recall 0.960 measured: points the shape test called flat where the phases share a neighbourhood
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.95
     assert rep["stats"]["n_pylons"] >= 10
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6  # line B over each phase: not averaged into one
@@ -565,7 +566,7 @@ def test_mobile_scanner_scene_thins_with_range():
 
 
 @pytest.mark.parametrize("variant, extra, min_recall", [
-    ("stacked", {}, 0.97),  # three phases 5 m above one another on each side
+    ("stacked", {}, 0.985),  # three phases 5 m above one another on each side (0.994 measured)
     ("distribution", {"slope_pct": 25.0}, 0.9),  # a 25 % hillside, trees under and beside the wires
 ])
 def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp_path):
@@ -622,7 +623,7 @@ def test_wire_points_on_synthetic_truth(corridor_result, corridor):
     t = laspy.read(corridor).classification == 14
     p = laspy.read(wires).classification == 14
     precision, recall = (t & p).sum() / p.sum(), (t & p).sum() / t.sum()
-    assert precision >= 0.98 and recall >= 0.96
+    assert precision >= 0.98 and recall >= 0.98  # 0.999 / 0.988 measured
 
 
 def _ahn4_real(name, tmp_path):
@@ -634,7 +635,7 @@ def _ahn4_real(name, tmp_path):
     return tmp_path / f"{name}.laz", sub
 
 
-@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.97), ("12AN2_20", 0.94)])
+@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.975), ("12AN2_20", 0.955)])
 def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (12AN2_20's
     sparse earth wires on top are the misses left: see the issue notes), and the tile's one tower
@@ -657,18 +658,20 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-def test_mobile_scan_stacked_wires_at_default_parameters(tmp_path):
-    """Oakland part3_an (a car-mounted scanner under a distribution line, wires 0.3-1 m above one
-    another), no setting: wire points against the CMU wire labels (class 14). A floor under what
-    the 3D step reaches (P 0.957 / R 0.622; R 0.306 before the catenary peel, 0.545 before its
-    sampling along the line and the search of what pieces leave), not the issue's 0.90: the 2D
-    Hough still misses the line's last 40 m past a bend (see the issue notes)."""
-    path = shared_file("oakland_mls/oakland_part3_an.laz")
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.93, 0.6), ("part3_ak", 0.8, 0.9)])
+def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
+    """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
+    points against the CMU wire labels (class 14). Floors under what is reached (part3_an, wires
+    0.3-1 m above one another: P 0.948 / R 0.623; R 0.306 before the catenary peel; part3_ak,
+    wires seen for 5-8 m between crowns: 0.818 / 0.931, R 0.674 while a wire piece had to be
+    S_min long), not the issue's 0.90: part3_an's last 40 m past a bend and part2_ai's sparse
+    upper wire among crowns are still missed (see the issue notes)."""
+    path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14
     pred = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
-    assert precision >= 0.9 and recall >= 0.58, (precision, recall)
+    assert precision >= min_precision and recall >= min_recall, (precision, recall)
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):
