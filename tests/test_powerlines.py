@@ -329,6 +329,32 @@ def test_points_on_spans_take_what_lies_on_a_fitted_catenary():
     assert (points_on_spans([sp], [(anchor, direction, 0.0, 40.0)], xy[:, 0], xy[:, 1], z, 0.2)[0] == -1).all()
 
 
+def test_a_span_records_how_thin_its_points_are_across_the_line():
+    """A wire's lateral scatter about its straight plan trend is what the 3D validation tests
+    (WIRE_LATERAL_RMS_M): a drifting but thin wire passes, a crown edge's spread does not."""
+    from toolbox_plugins.powerlines.core import WIRE_LATERAL_RMS_M, _span
+
+    rng = np.random.default_rng(3)
+    s = np.sort(rng.uniform(0, 30, 200))
+    fit = (10.0, 15.0, 300.0, 0.03)
+    thin = _span(0, 0, 0, s, 0.2 + 0.01 * s + rng.normal(0, 0.04, len(s)), fit)  # drifts 0.3 m, 4 cm scatter
+    assert thin.offset_slope == pytest.approx(0.01, abs=0.002) and thin.offset_rms == pytest.approx(0.04, abs=0.008)
+    assert thin.offset_rms <= WIRE_LATERAL_RMS_M
+    wide = _span(0, 0, 0, s, rng.uniform(-0.6, 0.6, len(s)), fit)  # spread over 1.2 m: rms 0.35
+    assert wide.offset_rms > WIRE_LATERAL_RMS_M
+
+
+def test_a_second_pass_line_along_a_found_one_is_not_another_conductor():
+    from toolbox_plugins.powerlines.plugin import _along
+
+    h = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 100.0)
+    d = np.array([np.cos(np.radians(0.3)), np.sin(np.radians(0.3))])
+    assert _along((np.array([20.0, 0.1]), d, 0.0, 30.0), h, 0.4)  # the rest of its points
+    assert not _along((np.array([20.0, 0.6]), d, 0.0, 30.0), h, 0.4)  # a conductor beside it
+    bend = np.array([np.cos(np.radians(4.0)), np.sin(np.radians(4.0))])
+    assert not _along((np.array([100.0, 0.0]), bend, 0.0, 40.0), h, 0.4)  # past a bend
+
+
 def test_catenary_fit_minimises_the_soft_l1_cost_as_scipy_does():
     # the fit runs Levenberg-Marquardt on residuals transformed so that their squares sum to the
     # soft-L1 cost: on a span with outliers (an insulator, birds) it must land where scipy's
@@ -658,14 +684,15 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.93, 0.6), ("part3_ak", 0.8, 0.9)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.69), ("part3_ak", 0.8, 0.9)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors under what is reached (part3_an, wires
-    0.3-1 m above one another: P 0.948 / R 0.623; R 0.306 before the catenary peel; part3_ak,
-    wires seen for 5-8 m between crowns: 0.818 / 0.931, R 0.674 while a wire piece had to be
-    S_min long), not the issue's 0.90: part3_an's last 40 m past a bend and part2_ai's sparse
-    upper wire among crowns are still missed (see the issue notes)."""
+    0.3-1 m above one another: P 0.930 / R 0.715; R 0.306 before the catenary peel, 0.623 before
+    the second pass found the line past its bend; part3_ak, wires seen for 5-8 m between crowns:
+    0.818 / 0.931, R 0.674 while a wire piece had to be S_min long), not the issue's 0.90:
+    part2_ai's sparse upper wire among crowns and the short wires across the street at the
+    poles are still missed (see the issue notes)."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14

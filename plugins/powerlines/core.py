@@ -193,6 +193,11 @@ def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
     return len(widths) >= 2 and widths.max() <= max_band_m
 
 
+# a wire is thin across its line: its points' lateral rms about a straight plan trend (ALS and
+# mobile scans alike: 0.04-0.1 m; a crown's edge lined up along a street is wider)
+WIRE_LATERAL_RMS_M = 0.15
+
+
 @dataclass
 class Span:
     conductor: int  # index of the 2D line
@@ -208,6 +213,7 @@ class Span:
     sag: float
     offset: float = 0.0  # the wire's lateral offset from the 2D line at s = 0 (side-by-side conductors)
     offset_slope: float = 0.0  # its change per unit along the line (wires not quite parallel to it)
+    offset_rms: float = 0.0  # its points' lateral scatter about that straight trend (a wire is thin)
 
 
 def line_fit(x, y) -> tuple[float, float]:
@@ -516,11 +522,12 @@ def _span(line: int, wire: int, number: int, s, off, fit) -> Span:
     chord = catenary(a, z0, s0, c) + (catenary(b, z0, s0, c) - catenary(a, z0, s0, c)) * (ss - a) / (b - a)
     sag = float(np.max(chord - catenary(ss, z0, s0, c)))
     o1, o0 = line_fit(s, off) if len(s) >= 3 else (0.0, float(np.median(off)))
-    return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1))
+    o_rms = float(np.sqrt(np.mean((off - o1 * s - o0) ** 2)))
+    return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms)
 
 
 def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float, gap_m: float, tol_m: float = 0.1,
-                    lateral_tol_m: float = 0.15, max_slope: float = 0.5, n_samples: int = 2000, max_tries: int = 32,
+                    lateral_tol_m: float = WIRE_LATERAL_RMS_M, max_slope: float = 0.5, n_samples: int = 2000, max_tries: int = 32,
                     seed: int = 0):
     """Catenaries in a piece of (along-line, height) points that no single one fits, strongest
     first: a parabola through three points (a catenary's first-order form) with the most points

@@ -18,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import conductors_3d, local_surface_density, points_on_spans, shape_classes
+    from .core import local_surface_density, points_on_spans, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -61,44 +61,35 @@ def _run(inputs, params, ctx):
     keep = idx[linear]
     timings["candidates_s"] = time.perf_counter() - t
 
-    # 3. top-hat filter and 4. tiled Hough (through their algorithms)
-    t = time.perf_counter()
-    sub = pc.subset(keep)
+    # 3. top-hat filter, 4. tiled Hough (through their algorithms), 5. the 3D step
     # the mask cell must keep conductors band_m apart (the closest the Hough tells apart) in
     # separate cells with an empty one between them, or the opening keeps their band and the
     # top-hat throws the wires away (AHN4's side-by-side conductors at the method's 0.5 m)
     cell_used = params["cell_size_m"] if params["cell_size_m"] is not None else round(params["band_m"] / 3, 3)
-    th = ctx.call("tophat", {"points": sub}, cell_size_m=cell_used,
-                  max_points_per_cell=params["max_points_per_cell"]).outputs["points"]
-    timings["tophat_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
-                                 "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
-    lines = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
-    timings["hough_s"] = time.perf_counter() - t
-
-    # 5. 3D: wires along each 2D line, split by height and continuity, a catenary per span
-    t = time.perf_counter()
-    geo = []
-    cond = lines["conductors"]
-    for g in cond.geometry:
-        (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
-        a = np.array([ax, ay]) * hu
-        d = np.array([bx - ax, by - ay]) * hu
-        L = float(np.hypot(*d))
-        geo.append((a, d / L, 0.0, L))
-    spans, line_of, wire_of_pt = conductors_3d(
-        geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
-        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
-        ground_z=(pc.z[keep] * vu - hag[keep]))
-    # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points
-    # and hangs gently (pylon members and roof edges are straight in plan but not wires); shorter
-    # pieces only add wire points to a conductor that has one
-    good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"] and
-            abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
-    if params["validate_3d"]:
-        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
-    timings["conductors_3d_s"] = time.perf_counter() - t
+    lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings)
+    free = keep[line_of < 0]
+    if params["second_pass"] and len(free) >= 100:
+        # the wire-like points on no wire, searched again: a stretch past a bend in the line whose
+        # votes the first line's band took, wires a stronger line outvoted in a tile; what is left
+        # is mostly clutter, so a line found there must be mostly wire (half its span points on
+        # catenaries that fit)
+        t = time.perf_counter()
+        lines2, geo2, spans2, line_of2, wire2, _ = _lines_and_wires(pc, free, hag, cell_used, params, ctx, {},
+                                                                    min_fit_share=0.5)
+        # a line along one found already is the rest of its points (near a tower, a sparse
+        # stretch), not another conductor: left out
+        new = [i for i, g in enumerate(geo2) if not any(_along(g, h, params["band_m"]) for h in geo)]
+        lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
+        if len(geo2):
+            n0 = len(geo)
+            for sp in spans2:
+                sp.conductor += n0
+            geo, spans = geo + geo2, spans + spans2
+            pos = np.flatnonzero(line_of < 0)
+            line_of[pos] = np.where(line_of2 >= 0, line_of2 + n0, -1)
+            wire_of_pt[pos] = np.where(line_of2 >= 0, wire2, -1)
+            lines = _append_conductors(lines, lines2, n0)
+        timings["second_pass_s"] = time.perf_counter() - t
 
     # candidates the shape test left out as steep that lie on a fitted span are its points too
     # (next to a pole top a wire point's neighbourhood leans on the pole)
@@ -169,14 +160,14 @@ def _run(inputs, params, ctx):
         cls[tower_pt] = 15
         cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
-    if len(cond) == 0 and linear.sum() >= 200 and len(th) < 0.15 * linear.sum():
+    if len(cond) == 0 and linear.sum() >= 200 and n_th < 0.15 * linear.sum():
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
         # opening keeps, and the top-hat throws the wires away
         ctx.log.warning(
             "powerlines: the top-hat kept %d of %d wire-like points and no conductor was found; conductors "
             "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
-            "leave cell_size_m automatic or set it to a third of their spacing", len(th), int(linear.sum()), cell_used)
-    stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": len(th),
+            "leave cell_size_m automatic or set it to a third of their spacing", n_th, int(linear.sum()), cell_used)
+    stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
@@ -261,6 +252,90 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     return arms
 
 
+
+def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0):
+    """Top-hat, tiled Hough and the 3D step on the wire-like candidates ``keep`` (indices into
+    ``pc``): (Hough layers, line geometry, spans, per-keep conductor and wire, top-hat size)."""
+    import time
+
+    import numpy as np
+
+    from .core import WIRE_LATERAL_RMS_M, conductors_3d
+
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    t = time.perf_counter()
+    sub = pc.subset(keep)
+    th = ctx.call("tophat", {"points": sub}, cell_size_m=cell_used,
+                  max_points_per_cell=params["max_points_per_cell"]).outputs["points"]
+    timings["tophat_s"] = timings.get("tophat_s", 0.0) + time.perf_counter() - t
+    t = time.perf_counter()
+    hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
+                                 "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
+    lines = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
+    timings["hough_s"] = timings.get("hough_s", 0.0) + time.perf_counter() - t
+    # wires along each 2D line, split by height and continuity, a catenary per span
+    t = time.perf_counter()
+    geo = []
+    for g in lines["conductors"].geometry:
+        (ax, ay), (bx, by) = g.coords[0], g.coords[-1]
+        a = np.array([ax, ay]) * hu
+        d = np.array([bx - ax, by - ay]) * hu
+        L = float(np.hypot(*d))
+        geo.append((a, d / L, 0.0, L))
+    spans, line_of, wire_of_pt = conductors_3d(
+        geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
+        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
+        ground_z=(pc.z[keep] * vu - hag[keep]))
+    # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points,
+    # is thin across the line and hangs gently (pylon members, roof edges and a crown's edge are
+    # straight in plan but not wires); shorter pieces only add wire points to a conductor that has one
+    good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"]
+            and sp.offset_rms <= WIRE_LATERAL_RMS_M
+            and abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
+    if min_fit_share:  # and most of what its spans hold fits them
+        tot, fit = np.zeros(len(geo)), np.zeros(len(geo))
+        for sp in spans:
+            tot[sp.conductor] += sp.n_points
+            fit[sp.conductor] += sp.n_points if sp.rms <= params["max_rms_3d_m"] else 0
+        good = {c for c in good if fit[c] >= min_fit_share * tot[c]}
+    if params["validate_3d"]:
+        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
+    timings["conductors_3d_s"] = timings.get("conductors_3d_s", 0.0) + time.perf_counter() - t
+    return lines, geo, spans, line_of, wire_of_pt, len(th)
+
+
+def _along(g, h, band_m: float, max_angle_deg: float = 1.0) -> bool:
+    """Whether line ``g`` runs along line ``h`` (both (anchor, direction, t0, t1)): within
+    ``max_angle_deg`` of it and both its ends within ``band_m`` of it."""
+    import numpy as np
+
+    (a, d, t0, t1), (b, e, _, _) = g, h
+    if abs(float(d @ e)) < np.cos(np.radians(max_angle_deg)):
+        return False
+    normal = np.array([-e[1], e[0]])
+    return all(abs(float((a + t * d - b) @ normal)) <= band_m for t in (t0, t1))
+
+
+def _append_conductors(lines: dict, more: dict, n0: int) -> dict:
+    """The layers of a second Hough pass appended to the first's, its conductors numbered from ``n0``."""
+    import pandas as pd
+
+    out = {}
+    for name in ("conductors", "conductor_segments"):
+        add = more[name].assign(conductor=more[name]["conductor"] + n0)
+        g = pd.concat([lines[name], add], ignore_index=True)
+        g.attrs.update(lines[name].attrs)
+        out[name] = g
+    cr = more["crossings"]
+    if len(cr):
+        cr = cr.assign(conductors=[",".join(str(int(v) + n0) for v in str(c).split(",") if v != "")
+                                   for c in cr["conductors"]])
+        out["crossings"] = pd.concat([lines["crossings"], cr], ignore_index=True)
+        out["crossings"].attrs.update(lines["crossings"].attrs)
+    else:
+        out["crossings"] = lines["crossings"]
+    return out
+
 def _keep_conductors(keep_lines, lines, geo, spans, line_of, wire_of_pt):
     """Only the given conductors (renumbered) in the layers, the geometry, the spans and the
     per-point conductor and wire of the 3D step."""
@@ -328,7 +403,11 @@ def toolbox_algorithms():
             "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
             "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
-            "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart); pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
+            "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart; "
+            "pieces between cuts or occlusions from S_min / 2); a conductor holds a span of S_min that fits, hangs "
+            "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
+            "searched once more (second_pass: a line's stretch past a bend; crossings between lines of the two "
+            "passes are not computed); pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
             "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
             "conductors_3d, pylons."),
         reference=REFERENCE,
@@ -374,6 +453,8 @@ def toolbox_algorithms():
                       "paper) by validated segments", choices=("extent", "segments")),
             Parameter("validate_3d", bool, True, "keep only conductors that are wires in 3D (a catenary span of at "
                       "least S_min with a small residual and gentle slope)"),
+            Parameter("second_pass", bool, True, "search the wire-like points left on no wire once more (a line's "
+                      "stretch past a bend, wires outvoted in a tile); its lines must hold mostly wire"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
