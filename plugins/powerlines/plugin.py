@@ -74,13 +74,14 @@ def _run(inputs, params, ctx):
         # is mostly clutter, so a line found there must be mostly wire (half its span points on
         # catenaries that fit)
         t = time.perf_counter()
-        lines2, geo2, spans2, line_of2, wire2, _ = _lines_and_wires(pc, free, hag, cell_used, params, ctx, {},
-                                                                    min_fit_share=0.5)
-        # a line along one found already is the rest of its points (near a tower, a sparse
-        # stretch), not another conductor: left out
-        new = [i for i, g in enumerate(geo2) if not any(_along(g, h, params["band_m"]) for h in geo)]
-        lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
-        if len(geo2):
+        found2 = _lines_and_wires(pc, free, hag, cell_used, params, ctx, {}, min_fit_share=0.5, optional=True)
+        if found2 is not None:
+            lines2, geo2, spans2, line_of2, wire2, _ = found2
+            # a line along one found already is the rest of its points (near a tower, a sparse
+            # stretch), not another conductor: left out
+            new = [i for i, g in enumerate(geo2) if not any(_along(g, h, params["band_m"]) for h in geo)]
+            lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
+        if found2 is not None and len(geo2):
             n0 = len(geo)
             for sp in spans2:
                 sp.conductor += n0
@@ -253,9 +254,10 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
 
 
 
-def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0):
+def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0, optional=False):
     """Top-hat, tiled Hough and the 3D step on the wire-like candidates ``keep`` (indices into
-    ``pc``): (Hough layers, line geometry, spans, per-keep conductor and wire, top-hat size)."""
+    ``pc``): (Hough layers, line geometry, spans, per-keep conductor and wire, top-hat size);
+    None when ``optional`` and the top-hat keeps too few points for a line."""
     import time
 
     import numpy as np
@@ -268,6 +270,8 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     th = ctx.call("tophat", {"points": sub}, cell_size_m=cell_used,
                   max_points_per_cell=params["max_points_per_cell"]).outputs["points"]
     timings["tophat_s"] = timings.get("tophat_s", 0.0) + time.perf_counter() - t
+    if optional and len(th) < params["min_votes"]:  # no line can reach min_votes: nothing to search
+        return None
     t = time.perf_counter()
     hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
                                  "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
