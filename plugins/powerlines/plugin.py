@@ -253,7 +253,6 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     return arms
 
 
-
 def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0, optional=False):
     """Top-hat, tiled Hough and the 3D step on the wire-like candidates ``keep`` (indices into
     ``pc``): (Hough layers, line geometry, spans, per-keep conductor and wire, top-hat size);
@@ -339,6 +338,7 @@ def _append_conductors(lines: dict, more: dict, n0: int) -> dict:
     else:
         out["crossings"] = lines["crossings"]
     return out
+
 
 def _keep_conductors(keep_lines, lines, geo, spans, line_of, wire_of_pt):
     """Only the given conductors (renumbered) in the layers, the geometry, the spans and the
@@ -456,7 +456,7 @@ def toolbox_algorithms():
             Parameter("crossing_validation", str, "extent", "crossings confirmed by conductor extents or (the "
                       "paper) by validated segments", choices=("extent", "segments")),
             Parameter("validate_3d", bool, True, "keep only conductors that are wires in 3D (a catenary span of at "
-                      "least S_min with a small residual and gentle slope)"),
+                      "least S_min with a small residual, gentle slope and thin across the line)"),
             Parameter("second_pass", bool, True, "search the wire-like points left on no wire once more (a line's "
                       "stretch past a bend, wires outvoted in a tile); its lines must hold mostly wire"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
