@@ -331,8 +331,7 @@ def _append_conductors(lines: dict, more: dict, n0: int) -> dict:
         out[name] = g
     cr = more["crossings"]
     if len(cr):
-        cr = cr.assign(conductors=[",".join(str(int(v) + n0) for v in str(c).split(",") if v != "")
-                                   for c in cr["conductors"]])
+        cr = cr.assign(conductors=[",".join(str(i + n0) for i in row) for row in _crossing_ids(cr)])
         out["crossings"] = pd.concat([lines["crossings"], cr], ignore_index=True)
         out["crossings"].attrs.update(lines["crossings"].attrs)
     else:
@@ -365,13 +364,18 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     seg = seg.assign(conductor=[remap[c] for c in seg["conductor"]])
     cr = lines["crossings"]
     if len(cr):
-        ids = [[int(v) for v in str(c).split(",") if v != ""] for c in cr["conductors"]]
+        ids = _crossing_ids(cr)
         ok = [all(i in remap for i in row) for row in ids]
         cr = cr[ok].reset_index(drop=True)
         cr = cr.assign(conductors=[",".join(str(remap[i]) for i in row) for row, k in zip(ids, ok) if k])
     for g, src in ((new_cond, cond), (seg, lines["conductor_segments"]), (cr, lines["crossings"])):
         g.attrs.update(src.attrs)
     return {"conductors": new_cond, "conductor_segments": seg, "crossings": cr}
+
+
+def _crossing_ids(cr) -> list[list[int]]:
+    """The conductors of each crossing (the layer's comma-separated ``conductors`` field)."""
+    return [[int(v) for v in str(c).split(",") if v != ""] for c in cr["conductors"]]
 
 
 def _tile_buffer_m(p) -> float:
