@@ -122,6 +122,8 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
             mask[p] = ok
     if planar.any():
         planar &= ~ribbons(xyz, idx, dist, planar, ~rugged)
+    if rugged.any():
+        rugged &= ~tubes(xyz, idx, dist, rugged, ~planar)
     linear = ~rugged & ~planar
     # wires hang nearly level; a linear set along a steep axis is a pole or a tower leg
     li = np.flatnonzero(linear)
@@ -177,6 +179,47 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
             if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m, :2], bin_m, max_band_m, floor_share):
                 out[m] = True
     return out & planar
+
+
+def tubes(xyz, idx, dist, rugged, smooth, link: float = 1.0, max_width_m: float = 1.0, min_points: int = 20,
+          piece_m: float = 10.0, min_length_m: float = 5.0):
+    """Rugged points that belong to a bundle of sub-conductors (a triangle or a square of wires
+    0.4-0.6 m apart): volumetric in a small neighbourhood, but the set they form (with the
+    ``smooth`` points linked to them within ``link``), taken in ``piece_m`` pieces along its main
+    axis, is a tube: across the axis in plan and in height about a straight trend it stays within
+    ``max_width_m`` (2nd-98th percentile) over at least ``min_length_m``; a crown is metres
+    across."""
+    n = len(xyz)
+    ok = (dist < link) & np.r_[smooth, False][idx] & smooth[:, None]
+    rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
+    cols = idx.ravel()[ok.ravel()]
+    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    lab = np.where(smooth, lab, -1)
+    out = np.zeros(n, bool)
+    for k in np.unique(lab[rugged & smooth]):
+        comp = np.flatnonzero(lab == k)
+        if len(comp) < min_points:
+            continue
+        p = xyz[comp, :2] - xyz[comp, :2].mean(axis=0)
+        _, _, vt = np.linalg.svd(p, full_matrices=False)
+        along = p @ vt[0]
+        piece = ((along - along.min()) / piece_m).astype(np.int64)
+        order = np.argsort(piece, kind="stable")
+        for m in np.split(comp[order], np.cumsum(np.bincount(piece))[:-1]):
+            if len(m) < min_points or not rugged[m].any():
+                continue
+            q = xyz[m, :2] - xyz[m, :2].mean(axis=0)
+            _, _, vq = np.linalg.svd(q, full_matrices=False)
+            a, across = q @ vq[0], q @ vq[1]
+            if np.ptp(a) < min_length_m:
+                continue
+            slope, icpt = line_fit(a, xyz[m, 2])
+            up = xyz[m, 2] - slope * a - icpt
+            width = [np.subtract(*np.percentile(v, [98, 2])) for v in (across, up)]
+            if max(width) <= max_width_m:
+                out[m] = True
+    return out & rugged
 
 
 def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
@@ -441,7 +484,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
             if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))
         _, lab = connected_components(g, directed=False)
-        lab = _split_bundles(s, off, lab, min_points)
+        lab = _split_bundles(s, off, lab, min_points, z=z)
         wire_of = _chain_pieces(s, z, lab, min_points, gap_max=6 * s_link, z_tol=z_link)
         next_wire = int(wire_of.max()) + 1 if len(wire_of) else 0
         for k in np.flatnonzero(wire_of >= 0):
@@ -710,11 +753,15 @@ def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
     return best_r, best_k
 
 
-def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: int = 2) -> np.ndarray:
-    """Sub-conductors of a bundle hang side by side at one height, closer than their scatter can
-    keep apart in a neighbour graph: split a piece in two where its lateral residual (after a
-    straight trend along the line) is clearly bimodal (two-means, centres ≥ ``min_gap`` apart
-    and ≥ 4 pooled standard deviations)."""
+def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, depth: int = 3,
+                   window_m: float = 5.0, max_sd: float = WIRE_LATERAL_RMS_M) -> np.ndarray:
+    """Sub-conductors of a bundle hang side by side (2), in a triangle (3) or a square (4),
+    closer than their scatter can keep apart in a neighbour graph: split a piece in two where
+    its residual across the line (after a straight trend along it) or, given ``z``, in height
+    (after a running mean over ``window_m`` along it: a span's sag is smooth at that scale) is
+    clearly bimodal (two-means, centres >= ``min_gap`` apart and >= 4 pooled standard
+    deviations, each group no wider than a wire: ``max_sd``; layers of a crown are wider); of the
+    two directions the clearer split, repeated ``depth`` times (a square bundle needs two)."""
     lab = lab.copy()
     for _ in range(depth):
         nxt = lab.max() + 1
@@ -722,16 +769,44 @@ def _split_bundles(s, off, lab, min_points: int, min_gap: float = 0.25, depth: i
         for k in np.flatnonzero(np.bincount(lab) >= 2 * min_points):
             m = np.flatnonzero(lab == k)
             slope, icpt = line_fit(s[m], off[m])
-            trend = slope * s[m] + icpt
-            r = off[m] - trend
-            split = _two_means_1d(r, min_points)
-            if split is None:
-                continue
-            side, c0, c1, sd = split
-            if c1 - c0 >= max(min_gap, 4 * sd):
-                lab[m[side]] = nxt
+            best = None
+            for r in (off[m] - slope * s[m] - icpt, _height_residual(s[m], z[m], window_m) if z is not None else None):
+                if r is None:
+                    continue
+                split = _two_means_1d(r, min_points)
+                if split is None:
+                    continue
+                side, c0, c1, sd = split
+                if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd and (best is None or (c1 - c0) / sd > best[0]):
+                    best = ((c1 - c0) / max(sd, 1e-9), side)
+            if best is not None:
+                lab[m[best[1]]] = nxt
                 nxt += 1
     return lab
+
+
+def _height_residual(s, z, window_m: float) -> np.ndarray:
+    """Heights less their running mean over ``window_m`` along the line; once more with the
+    two groups of a first two-means brought together, so that a stretch where one
+    sub-conductor has more points does not pull the mean towards it."""
+    order = np.argsort(s, kind="stable")
+    ss = s[order]
+    lo = np.searchsorted(ss, ss - window_m / 2)
+    hi = np.searchsorted(ss, ss + window_m / 2, side="right")
+
+    def running_mean(v):
+        c = np.r_[0.0, np.cumsum(v[order])]
+        out = np.empty(len(v))
+        out[order] = (c[hi] - c[lo]) / (hi - lo)
+        return out
+
+    r = z - running_mean(z)
+    split = _two_means_1d(r, max(3, len(r) // 10))
+    if split is not None:
+        side, c0, c1, _ = split
+        level = np.where(side, c1, c0)  # each point's group centre
+        r = z - level - running_mean(z - level) + level
+    return r
 
 
 def _two_means_1d(r: np.ndarray, min_size: int):
