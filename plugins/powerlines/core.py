@@ -717,6 +717,45 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
     line_of[fi], wire_of_point[fi] = li, [line_spans[j].wire for j in k[got]]
 
 
+def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
+                    min_run_m: float = 1.5, line_m: float = 0.1, max_tilt_deg: float = 70.0,
+                    min_cover: float = 0.3) -> bool:
+    """Whether a span lies in a surface: a scan row on a roof or the edge of an eave, which a
+    mobile scanner sees as a thin straight line at a range where the surface is too sparse to
+    count as one. ``s``, ``off``, ``dz``: candidate points along the line, across it and in
+    height, relative to the span (its plan trend and catenary).
+
+    In the cross-section a wire is a point, with its neighbours (sub-conductors, phases of a
+    ribbon) at discrete places around it; a surface is a line through it. A span lies in a
+    surface when, along some direction within ``max_tilt_deg`` of level, points within
+    ``line_m`` of that line fill every ``bin_m`` from the span out to ``min_run_m`` on one
+    side, each bin along at least ``min_cover`` of the span's length and denser than the band
+    just beside the line (a plane, not the volume of a crown). Four wires 0.4 m apart span
+    1.2 m with gaps; a pole or a cross arm holds a few metres of the span, not a third."""
+    near = (s >= s_from) & (s <= s_to) & (np.abs(off) <= reach_m) & (np.abs(dz) <= reach_m)
+    s, off, dz = s[near], off[near], dz[near]
+    n_sbins = max(int(np.ceil(s_to - s_from)), 1)
+    sbin = np.minimum(((s - s_from) // 1.0).astype(np.int64), n_sbins - 1)
+    n_bins = int(round(min_run_m / bin_m))
+    for phi in np.radians(np.arange(-max_tilt_deg, max_tilt_deg + 1e-9, 5.0)):
+        t = off * np.cos(phi) + dz * np.sin(phi)
+        n = np.abs(-off * np.sin(phi) + dz * np.cos(phi))
+        on, beside = n <= line_m, (n > 2 * line_m) & (n <= 4 * line_m)
+        for side in (1.0, -1.0):
+            b = np.floor((side * t - bin_m) / bin_m).astype(np.int64)  # bin 0 starts bin_m out
+            inb = (b >= 0) & (b < n_bins)
+            full = 0
+            for k in range(n_bins):
+                m = inb & (b == k)
+                cover = len(np.unique(sbin[m & on])) / n_sbins
+                if cover < min_cover or (m & on).sum() <= (m & beside).sum() / 2:
+                    break
+                full += 1
+            if full == n_bins:
+                return True
+    return False
+
+
 def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
     """For points outside the 3D step (the candidates the shape test left out: a wire's points
     next to a pole top, whose neighbourhood leans on the pole), the conductor and wire of the

@@ -109,6 +109,13 @@ def _run(inputs, params, ctx):
     keep = np.r_[keep, other[on]]
     line_of, wire_of_pt = np.r_[line_of, o_line[on]], np.r_[wire_of_pt, o_wire[on]]
 
+    # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
+    # volume, points of a crown that line up
+    not_wires = _not_wires(spans, geo, pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu, params["max_rms_3d_m"])
+    if not_wires:
+        kept = [i for i in range(len(geo)) if i not in not_wires]
+        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
+
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
     # footprint is one of its arms, not a conductor
     t = time.perf_counter()
@@ -305,6 +312,42 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
     timings["conductors_3d_s"] = timings.get("conductors_3d_s", 0.0) + time.perf_counter() - t
     return lines, geo, spans, line_of, wire_of_pt, len(th)
+
+
+def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0) -> set:
+    """Conductors that are not wires seen in the cross-section of their fitted spans, over the
+    candidates ``p*``: most span points in a surface (``span_on_surface``: a roof's scan row,
+    an eave), or no denser within 0.1 m than 0.2-0.5 m around (under ``min_contrast`` times:
+    points of a crown that happen to line up; a wire is a concentration of points, its
+    sub-conductors and neighbours sit at a few places around it)."""
+    import numpy as np
+
+    from .core import catenary, span_on_surface
+
+    out = set()
+    for li, (a, d, _, _) in enumerate(geo):
+        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
+        if not line_spans:
+            continue
+        dx, dy = px - a[0], py - a[1]
+        s, off = dx * d[0] + dy * d[1], -dx * d[1] + dy * d[0]
+        lo, hi = min(sp.s_from for sp in line_spans), max(sp.s_to for sp in line_spans)
+        reach = 2.0 + max(abs(sp.offset) + abs(sp.offset_slope) * max(abs(lo), abs(hi)) for sp in line_spans)
+        near = np.flatnonzero((s >= lo) & (s <= hi) & (np.abs(off) <= reach))
+        s, off, z = s[near], off[near], pz[near]
+        flat = core_n = ring_n = 0
+        for sp in line_spans:
+            o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
+            if span_on_surface(s, o, dz, sp.s_from, sp.s_to):
+                flat += sp.n_points
+            inside = (s >= sp.s_from) & (s <= sp.s_to)
+            r = np.hypot(o[inside], dz[inside])
+            core_n += int((r <= 0.1).sum())
+            ring_n += int(((r > 0.2) & (r <= 0.5)).sum())
+        contrast = (core_n / 0.01) / max(ring_n / (0.25 - 0.04), 1e-9)  # densities per unit area (x pi)
+        if flat > 0.5 * sum(sp.n_points for sp in line_spans) or contrast < min_contrast:
+            out.add(li)
+    return out
 
 
 def _along(g, h, band_m: float, max_angle_deg: float = 1.0) -> bool:
