@@ -860,14 +860,13 @@ def _score_corridor(truth: dict, gpkg: Path) -> dict:
     crossings and towers by distance."""
     import geopandas as gpd
 
-    from toolbox_plugins.powerlines.evaluation import conductor_hits
+    from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors
 
     cond = gpd.read_file(gpkg, layer="conductors")
     hits = conductor_hits(cond, truth)
     matched, used = {k for k, _ in hits}, {i for _, i in hits}
     cr = gpd.read_file(gpkg, layer="crossings")
-    cr_err = [float(np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"]))) if len(cr) else np.inf
-              for c in truth["crossings"]]
+    cr_err = crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]) if len(cr) else np.zeros((0, 2)), truth)
     py = gpd.read_file(gpkg, layer="pylons")
     tow = [float(np.min(np.hypot(py.geometry.x - q["x"], py.geometry.y - q["y"]))) if len(py) else np.inf
            for q in truth["pylons"]]

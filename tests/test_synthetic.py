@@ -242,6 +242,11 @@ def test_bundle_variants(n, shape):
     # sub-conductors stacked in plan share one 2D line: one per distinct plan offset
     offsets = {round(w["offset_m"], 3) for w in s.truth["wires"] if w["line"] == "A"}
     assert len([l for l in s.truth["conductor_lines_2d"] if l["line"] == "A"]) == len(offsets)
+    # each 2D line knows its bundle's centre in plan (one conductor per phase is a right answer)
+    centre = round(float(np.mean([w["offset_m"] for w in arm])), 3)
+    for line in s.truth["conductor_lines_2d"]:
+        if any(i in {w["id"] for w in arm} for i in line["wire_ids"]):
+            assert line["bundle_offset_m"] == centre and abs(line["offset_m"] - centre) <= 0.2 + 1e-9
 
 
 def test_truth_geopackage_layers(tmp_path):

@@ -703,7 +703,13 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
             ids = [w["id"] for w in truth["wires"] if w["line"] == line["name"] and round(w["offset_m"], 3) == off]
             a = p0 + across * off
             b = p1 + across * off
-            truth["conductor_lines_2d"].append({"line": line["name"], "offset_m": off, "wire_ids": ids,
+            # the plan centre of the bundle (phase) its wires belong to: sub-conductors closer in
+            # plan than a Hough band may come out as one conductor per phase, there
+            attach = next(w["attach"] for w in truth["wires"] if w["id"] == ids[0])
+            centre = float(np.mean([w["offset_m"] for w in truth["wires"]
+                                    if w["line"] == line["name"] and w["attach"] == attach]))
+            truth["conductor_lines_2d"].append({"line": line["name"], "offset_m": off, "bundle_offset_m": round(centre, 3),
+                                                "wire_ids": ids,
                                                 "a": [float(a[0] + ox), float(a[1] + oy)],
                                                 "b": [float(b[0] + ox), float(b[1] + oy)]})
 
