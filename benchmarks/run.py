@@ -446,7 +446,10 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
                  {"line_variant": "distribution", "scanner": "mobile", "density_ppm2": 100.0, "width_m": 300.0,
                   "height_m": 120.0, "track_offset_m": 12.0}),
                 ("mobile_dc", "double circuit, mobile scan", {"scanner": "mobile", "density_ppm2": 200.0,
-                                                              "width_m": 300.0, "height_m": 120.0})]
+                                                              "width_m": 300.0, "height_m": 120.0}),
+                # phases in bundles: a triangle 0.4 m, a square 0.6 m
+                ("bundle3", "triangle bundles 0.4 m", {"bundle": 3, "bundle_spacing_m": 0.4}),
+                ("bundle4", "square bundles 0.6 m", {"bundle": 4, "bundle_spacing_m": 0.6})]
     if quick:
         variants = variants[:1]
     for stem, label, kw in variants:

@@ -111,7 +111,9 @@ def _run(inputs, params, ctx):
 
     # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
     # volume, points of a crown that line up
+    t = time.perf_counter()
     not_wires = _not_wires(spans, geo, pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu, params["max_rms_3d_m"])
+    timings["not_wires_s"] = time.perf_counter() - t
     if not_wires:
         kept = [i for i in range(len(geo)) if i not in not_wires]
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
@@ -178,7 +180,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
@@ -458,7 +460,11 @@ def toolbox_algorithms():
             "pieces between cuts or occlusions from S_min / 2); a conductor holds a span of S_min that fits, hangs "
             "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
             "searched once more (second_pass: a line's stretch past a bend; crossings between lines of the two "
-            "passes are not computed); pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
+            "passes are not computed); a conductor must stand out in its cross-section (not a roof's scan row or "
+            "an eave in a surface, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
+            "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
+            "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
+            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
             "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
             "conductors_3d, pylons."),
         reference=REFERENCE,
