@@ -155,13 +155,8 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
     between them, where a roof fills its width. Bins holding under ``floor_share`` of the fullest
     bin count as empty (a cross arm or an insulator joins the wires at a pole)."""
     n = len(xyz)
-    ok = (dist < link) & np.r_[smooth, False][idx] & smooth[:, None]
-    rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
-    cols = idx.ravel()[ok.ravel()]
-    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
+    lab = _linked_sets(idx, dist, smooth, link)
     out = np.zeros(n, bool)
-    lab = np.where(smooth, lab, -1)
     for k in np.unique(lab[planar]):
         comp = np.flatnonzero(lab == k)
         if len(comp) < min_points:
@@ -171,11 +166,7 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
             continue
         # a ribbon linked to a crown or to a crossing line is a ribbon where it runs alone:
         # the set judged again piece by piece along its main axis
-        p = xyz[comp, :2] - xyz[comp, :2].mean(axis=0)
-        _, _, vt = np.linalg.svd(p, full_matrices=False)
-        along = p @ vt[0]
-        piece = ((along - along.min()) / piece_m).astype(np.int64)
-        for m in np.split(comp[np.argsort(piece, kind="stable")], np.cumsum(np.bincount(piece))[:-1]):
+        for m in _pieces_along(xyz, comp, piece_m):
             if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m, :2], bin_m, max_band_m, floor_share):
                 out[m] = True
     return out & planar
@@ -190,23 +181,13 @@ def tubes(xyz, idx, dist, rugged, smooth, link: float = 1.0, max_width_m: float 
     ``max_width_m`` (2nd-98th percentile) over at least ``min_length_m``; a crown is metres
     across."""
     n = len(xyz)
-    ok = (dist < link) & np.r_[smooth, False][idx] & smooth[:, None]
-    rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
-    cols = idx.ravel()[ok.ravel()]
-    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
-    lab = np.where(smooth, lab, -1)
+    lab = _linked_sets(idx, dist, smooth, link)
     out = np.zeros(n, bool)
     for k in np.unique(lab[rugged & smooth]):
         comp = np.flatnonzero(lab == k)
         if len(comp) < min_points:
             continue
-        p = xyz[comp, :2] - xyz[comp, :2].mean(axis=0)
-        _, _, vt = np.linalg.svd(p, full_matrices=False)
-        along = p @ vt[0]
-        piece = ((along - along.min()) / piece_m).astype(np.int64)
-        order = np.argsort(piece, kind="stable")
-        for m in np.split(comp[order], np.cumsum(np.bincount(piece))[:-1]):
+        for m in _pieces_along(xyz, comp, piece_m):
             if len(m) < min_points or not rugged[m].any():
                 continue
             q = xyz[m, :2] - xyz[m, :2].mean(axis=0)
@@ -220,6 +201,27 @@ def tubes(xyz, idx, dist, rugged, smooth, link: float = 1.0, max_width_m: float 
             if max(width) <= max_width_m:
                 out[m] = True
     return out & rugged
+
+
+def _linked_sets(idx, dist, smooth, link: float) -> np.ndarray:
+    """Connected sets of the ``smooth`` points through their k-neighbourhoods (``idx``/``dist``)
+    within ``link``; -1 for the others."""
+    n = len(idx)
+    ok = (dist < link) & np.r_[smooth, False][idx] & smooth[:, None]
+    rows = np.repeat(np.arange(n), idx.shape[1])[ok.ravel()]
+    cols = idx.ravel()[ok.ravel()]
+    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    return np.where(smooth, lab, -1)
+
+
+def _pieces_along(xyz, comp, piece_m: float) -> list[np.ndarray]:
+    """The points ``comp`` in ``piece_m`` pieces along their main axis in plan."""
+    p = xyz[comp, :2] - xyz[comp, :2].mean(axis=0)
+    _, _, vt = np.linalg.svd(p, full_matrices=False)
+    along = p @ vt[0]
+    piece = ((along - along.min()) / piece_m).astype(np.int64)
+    return np.split(comp[np.argsort(piece, kind="stable")], np.cumsum(np.bincount(piece))[:-1])
 
 
 def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
@@ -799,8 +801,9 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, 
     its residual across the line (after a straight trend along it) or, given ``z``, in height
     (after a running mean over ``window_m`` along it: a span's sag is smooth at that scale) is
     clearly bimodal (two-means, centres >= ``min_gap`` apart and >= 4 pooled standard
-    deviations, each group no wider than a wire: ``max_sd``; layers of a crown are wider); of the
-    two directions the clearer split, repeated ``depth`` times (a square bundle needs two)."""
+    deviations, the pooled spread no wider than a wire's, ``max_sd``: layers of a crown are
+    wider); of the two directions the clearer split, repeated ``depth`` times (a square bundle
+    needs two)."""
     lab = lab.copy()
     for _ in range(depth):
         nxt = lab.max() + 1
