@@ -548,6 +548,28 @@ def test_pylons_on_the_synthetic_corridor(corridor, corridor_result):
     assert (true_tower & (cls == 15)).sum() / (cls == 15).sum() >= 0.9  # tower points are tower points
 
 
+def test_a_short_piece_on_a_longer_line_is_merged_into_it():
+    """A wire's 150 m in one piece and its next 35 m, past a 12 m gap, fitted 0.5 degrees off (a
+    sparse far stretch of a mobile scan): both ends of the short piece lie within 0.25 m of the
+    long line and the two refitted together stay thin, so they become one conductor. A parallel
+    wire 0.6 m away, and a short piece 0.5 m off that one, stay apart."""
+    rng = np.random.default_rng(0)
+    t1, t2 = np.arange(0.0, 150.0, 0.3), np.arange(162.0, 197.0, 0.5)
+    y2 = (t2 - 179.5) * np.tan(np.radians(0.5))  # centred on the line: its ends 0.15 m off it
+    x = np.r_[t1, t2, t1, t2]
+    y = np.r_[rng.normal(0, 0.03, len(t1)), y2 + rng.normal(0, 0.03, len(t2)), 0.6 + rng.normal(0, 0.03, len(t1)),
+              1.1 + y2 + rng.normal(0, 0.03, len(t2))]
+    n1, n2 = len(t1), len(t2)
+    parts = [np.arange(n1), n1 + np.arange(n2), n1 + n2 + np.arange(n1), 2 * n1 + n2 + np.arange(n2)]
+    pieces = [hough._refit(x, y, m, len(m), 2.5, 8.0) for m in parts]
+    assert abs(float(pieces[1].direction @ pieces[0].direction)) > np.cos(np.radians(1.0))
+    out = hough.merge_pieces_on_lines(pieces, x, y, 2.5, 8.0, merge_gap_m=100.0)
+    assert len(out) == 3
+    merged = [c for c in out if len(c.members) == n1 + n2 and set(c.members) == set(np.r_[parts[0], parts[1]])]
+    assert len(merged) == 1 and np.ptp(merged[0].t_range) >= 195.0
+    assert any(set(c.members) == set(parts[2]) for c in out) and any(set(c.members) == set(parts[3]) for c in out)
+
+
 def test_crossings_average_only_where_lines_meet():
     """Three lines through one point give one crossing (the method's mean); one line across three
     parallel lines 0.6 m apart gives three (they meet it, not each other)."""

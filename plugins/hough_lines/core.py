@@ -377,16 +377,45 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
             final.append(g)
             continue
         todo += [[g[k] for k in order[:cut + 1]], [g[k] for k in order[cut + 1:]]]
-    out = []
-    for g in final:
-        members = np.unique(np.concatenate([found[i].members for i in g]))
-        anchor, direction, rms = fit_line(x[members], y[members], v_max)
-        pts = np.column_stack([x[members], y[members]])
-        t = (pts - anchor) @ direction
-        runs = runs_along(t, v_max, s_min)
-        if not runs:
-            continue
-        segs = [(anchor + a * direction, anchor + b * direction) for a, b in runs]
-        out.append(Conductor(anchor, direction, members, int(sum(found[i].votes for i in g)), rms,
-                             (float(t.min()), float(t.max())), segs))
+    out = [c for c in (_refit(x, y, np.unique(np.concatenate([found[i].members for i in g])),
+                              int(sum(found[i].votes for i in g)), v_max, s_min) for g in final) if c is not None]
+    return merge_pieces_on_lines(out, x, y, v_max, s_min, merge_angle_deg, merge_offset_m, merge_gap_m)
+
+
+def _refit(x, y, members, votes: int, v_max: float, s_min: float):
+    """A Conductor refitted on the points ``members`` (None: no validated run)."""
+    anchor, direction, rms = fit_line(x[members], y[members], v_max)
+    t = (np.column_stack([x[members], y[members]]) - anchor) @ direction
+    runs = runs_along(t, v_max, s_min)
+    segs = [(anchor + a * direction, anchor + b * direction) for a, b in runs]
+    return Conductor(anchor, direction, members, votes, rms, (float(t.min()), float(t.max())), segs) if runs else None
+
+
+def merge_pieces_on_lines(lines, x, y, v_max: float, s_min: float, merge_angle_deg: float = 1.0,
+                          merge_offset_m: float = 0.25, merge_gap_m: float = 25.0) -> list:
+    """Conductors with a shorter one merged into a longer one when within ``merge_angle_deg``
+    of it, both its ends within ``merge_offset_m`` of the longer line and within ``merge_gap_m``
+    of its extent along it, and the two refitted together stay within ``merge_offset_m`` rms: a
+    short piece fitted a few tenths of a degree off (a sparse stretch of a mobile scan) whose
+    anchor sits too far along for the pairwise test of detect_tiled."""
+    out = list(lines)
+    cos_lim = np.cos(np.radians(merge_angle_deg))
+    merged = True
+    while merged:
+        merged = False
+        for i, j in ((i, j) for i in range(len(out)) for j in range(len(out)) if i != j):
+            a, b = out[i], out[j]  # b: the shorter
+            if np.ptp(b.t_range) > np.ptp(a.t_range) or abs(float(a.direction @ b.direction)) < cos_lim:
+                continue
+            nrm = np.array([-a.direction[1], a.direction[0]])
+            ends = [b.anchor + t * b.direction for t in b.t_range]
+            along = sorted(float((e - a.anchor) @ a.direction) for e in ends)
+            if any(abs(float((e - a.anchor) @ nrm)) > merge_offset_m for e in ends) or \
+                    along[0] > a.t_range[1] + merge_gap_m or along[1] < a.t_range[0] - merge_gap_m:
+                continue
+            both = _refit(x, y, np.unique(np.r_[a.members, b.members]), a.votes + b.votes, v_max, s_min)
+            if both is not None and both.rms <= merge_offset_m:
+                out = [c for k, c in enumerate(out) if k not in (i, j)] + [both]
+                merged = True
+                break
     return out
