@@ -824,7 +824,7 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors under what is reached (part3_an, wires
-    0.3-1 m above one another: P 0.930 / R 0.715; R 0.306 before the catenary peel, 0.623 before
+    0.3-1 m above one another: P 0.948 / R 0.705; R 0.306 before the catenary peel, 0.623 before
     the second pass found the line past its bend; part3_ak, wires seen for 5-8 m between crowns:
     0.818 / 0.931, R 0.674 while a wire piece had to be S_min long), not the issue's 0.90:
     part2_ai's sparse upper wire among crowns and the short wires across the street at the
