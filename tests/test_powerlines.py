@@ -265,6 +265,27 @@ def test_catenary_fit_and_span_split():
     assert c == pytest.approx(1000, rel=0.02) and s0 == pytest.approx(100, abs=1) and rms < 0.04
 
 
+def test_a_span_climbing_from_a_pole_is_cut_there_and_a_slack_wire_is_not():
+    """A low-voltage wire on flat ground to a pole at 60 m, then climbing 10 m to the next pole
+    on an embankment: at the pole the slope rises far faster than any catenary's (c >= 100 m),
+    so the wire is cut there, though the slope never drops. One slack catenary (c = 150 m) over
+    the same length is not cut."""
+    rng = np.random.default_rng(3)
+    s = np.sort(rng.uniform(0, 100, 500))
+    z_pole = catenary(60.0, 10.0, 30.0, 400.0)
+    # second span: from (60, z_pole) to (100, z_pole + 10) with c = 400: its lowest point lies
+    # before the pole, so the wire leaves the pole climbing
+    c2 = 400.0
+    s02 = 80.0 - c2 * np.arcsinh(10.0 / (2 * c2 * np.sinh(20.0 / c2)))
+    z02 = z_pole - (catenary(60.0, 0.0, s02, c2))
+    z = np.where(s < 60.0, catenary(s, 10.0, 30.0, 400.0), catenary(s, z02, s02, c2)) + rng.normal(0, 0.03, len(s))
+    assert abs(catenary(100.0, z02, s02, c2) - (z_pole + 10.0)) < 1e-6
+    cuts = split_spans(s, z, 8.0)
+    assert len(cuts) == 1 and cuts[0] == pytest.approx(60.0, abs=3.0)
+    slack = catenary(s, 10.0, 50.0, 150.0) + rng.normal(0, 0.03, len(s))
+    assert split_spans(s, slack, 8.0) == []
+
+
 def test_peel_separates_stacked_wires_and_leaves_crowns():
     """Four wires of one span hung 0.35 m above one another (a mobile scan's distribution line,
     closer than the 3D step's height link) and a crown's scatter in the same band: each wire comes
@@ -361,6 +382,41 @@ def test_a_scan_row_on_a_roof_lies_in_a_surface_and_wires_do_not():
     arm = np.column_stack([rng.uniform(29.9, 30.0, 200), rng.uniform(-1.5, 1.5, 200), rng.normal(0, 0.02, 200)])
     at_pole = np.vstack([rows([0.0], (1.0, 0.0)), pole, arm])
     assert not span_on_surface(at_pole[:, 0], at_pole[:, 1], at_pole[:, 2], 0.0, L)
+
+
+def test_a_second_pass_line_along_a_first_is_folded_into_it():
+    """A second-pass line 0.5 degrees off a first-pass line it runs along (the wire past the end
+    of the first line's extent): its span, re-expressed in the first line's frame, describes the
+    same 3D curve (within a millimetre), becomes a new wire of that line, its points go to that
+    line, and the line's extent and plan geometry stretch over it."""
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.core import Span
+    from toolbox_plugins.powerlines.plugin import _fold_into
+
+    ang = np.radians(0.5)
+    dg = np.array([np.cos(ang), np.sin(ang)])
+    geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 100.0)]
+    geo2 = [(np.array([110.0, 0.2]), dg, 0.0, 40.0)]
+    sp = Span(0, 0, 0, 20.0, 500.0, 10.0, 0.0, 40.0, 0.03, 50, 0.4, 0.05, 0.001, 0.03)
+    lines = {"conductors": gpd.GeoDataFrame({"votes": [100]}, geometry=[LineString([(0, 0), (100, 0)])])}
+    spans = [Span(0, 0, 0, 50.0, 800.0, 12.0, 0.0, 100.0, 0.03, 200, 1.0)]
+    line_of, wire_of = np.array([0, 0, -1, -1, -1]), np.array([0, 0, -1, -1, -1])
+    pos = np.array([2, 3, 4])  # where pass 2's points sit
+    line_of2, wire2 = np.array([0, 0, -1]), np.array([0, 0, -1])
+    spans, geo, lines = _fold_into({0: 0}, geo2, [sp], line_of2, wire2, geo, spans, lines, line_of, wire_of, pos, 1.0)
+    new = [q for q in spans if q.conductor == 0 and q.wire == 1]
+    assert len(new) == 1 and list(line_of) == [0, 0, 0, 0, -1] and list(wire_of) == [0, 0, 1, 1, -1]
+    q = new[0]
+    t = np.linspace(0, 40, 9)
+    xy = geo2[0][0] + t[:, None] * dg + (sp.offset + sp.offset_slope * t)[:, None] * np.array([-dg[1], dg[0]])
+    z = catenary(t, sp.z0, sp.s0, sp.c)
+    s_h, off_h = xy[:, 0], xy[:, 1]  # the first line's frame: along x from the origin
+    np.testing.assert_allclose(off_h, q.offset + q.offset_slope * s_h, atol=1e-3)
+    np.testing.assert_allclose(z, catenary(s_h, q.z0, q.s0, q.c), atol=1e-3)
+    assert q.s_from == pytest.approx(s_h.min(), abs=1e-3) and q.s_to == pytest.approx(s_h.max(), abs=1e-3)
+    assert geo[0][3] == pytest.approx(s_h.max(), abs=1e-3)
+    assert lines["conductors"].geometry[0].length == pytest.approx(s_h.max(), abs=1e-3)
 
 
 def test_points_of_a_crown_that_line_up_are_no_conductor():

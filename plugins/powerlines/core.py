@@ -391,10 +391,11 @@ def fit_catenary(s, z):
     return float(z0), float(s0), float(np.exp(lc)), rms
 
 
-def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02):
+def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02, min_c_m: float = 100.0):
     """Cut positions along a wire at its attachment points. Along one catenary the slope only
     grows; where the slope drops (rising on the left, falling on the right) the wire passes an
-    attachment point. Slopes come from least-squares lines over ``window_m`` on each side."""
+    attachment point; so does a rise in slope far steeper than a catenary's (see below). Slopes
+    come from least-squares lines over ``window_m`` on each side."""
     if s.max() - s.min() < 2 * min_span:
         return []
     order = np.argsort(s)
@@ -421,9 +422,13 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
     left, right = slope(lo, mid), slope(mid, hi)
     drop = left - right
-    cand = np.isfinite(drop) & (drop > min_drop)
+    # a catenary's slope grows by window / c between the two windows; a jump far beyond what
+    # the slackest wire (c >= min_c_m) gives is a kink at an attachment point too (a span
+    # climbing an embankment from a pole at its foot)
+    kink = np.where(drop > 0, drop, -drop - window_m / min_c_m)
+    cand = np.isfinite(drop) & (((drop > 0) & (drop > min_drop)) | ((drop < 0) & (kink > 0)))
     cuts = []
-    for i in np.flatnonzero(cand)[np.argsort(-drop[cand])]:
+    for i in np.flatnonzero(cand)[np.argsort(-kink[cand])]:
         if all(abs(pos[i] - c) >= min_span for c in cuts):
             cuts.append(float(pos[i]))
     return sorted(cuts)

@@ -78,17 +78,25 @@ def _run(inputs, params, ctx):
         if found2 is not None:
             lines2, geo2, spans2, line_of2, wire2, _ = found2
             # a line along one found already is the rest of its points (near a tower, a sparse
-            # stretch), not another conductor: left out
-            new = [i for i, g in enumerate(geo2) if not any(_along(g, h, params["band_m"]) for h in geo)]
+            # stretch, past the end of its 2D extent), not another conductor: its wires are folded
+            # into that line's
+            along = {i: j for i, g in enumerate(geo2) for j in [next((j for j, h in enumerate(geo)
+                                                                      if _along(g, h, params["band_m"])), None)]
+                     if j is not None}
+            pos = np.flatnonzero(line_of < 0)  # where pass 2's points sit among pass 1's
+            if along:
+                spans, geo, lines = _fold_into(along, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of,
+                                               wire_of_pt, pos, hu)
+            new = [i for i in range(len(geo2)) if i not in along]
             lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
         if found2 is not None and len(geo2):
             n0 = len(geo)
             for sp in spans2:
                 sp.conductor += n0
             geo, spans = geo + geo2, spans + spans2
-            pos = np.flatnonzero(line_of < 0)
-            line_of[pos] = np.where(line_of2 >= 0, line_of2 + n0, -1)
-            wire_of_pt[pos] = np.where(line_of2 >= 0, wire2, -1)
+            mine = line_of2 >= 0  # the kept lines' points (the folded ones' are given out already)
+            line_of[pos[mine]] = line_of2[mine] + n0
+            wire_of_pt[pos[mine]] = wire2[mine]
             lines = _append_conductors(lines, lines2, n0)
         timings["second_pass_s"] = time.perf_counter() - t
 
@@ -350,6 +358,51 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         if flat > 0.5 * sum(sp.n_points for sp in line_spans) or contrast < min_contrast:
             out.add(li)
     return out
+
+
+def _fold_into(along: dict, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of, wire_of_pt, pos, hu):
+    """Second-pass lines ``along`` first-pass ones ({pass-2 line: pass-1 line}) folded into them:
+    their spans re-expressed in the pass-1 line's frame as new wires of it, their points (``pos``:
+    where pass 2's per-point arrays sit in the pass-1 ones) given to it, and its 2D extent and
+    plan line stretched over them. Returns (spans, geo, lines)."""
+    import dataclasses
+
+    import numpy as np
+    from shapely.geometry import LineString
+
+    next_wire = {j: max([sp.wire for sp in spans if sp.conductor == j], default=-1) + 1 for j in set(along.values())}
+    wire_map, spans = {}, list(spans)
+    for sp in spans2:
+        if sp.conductor not in along:
+            continue
+        j = along[sp.conductor]
+        if (sp.conductor, sp.wire) not in wire_map:
+            wire_map[(sp.conductor, sp.wire)] = next_wire[j]
+            next_wire[j] += 1
+        (ag, dg, _, _), (ah, dh, _, _) = geo2[sp.conductor], geo[j]
+        nh = np.array([-dh[1], dh[0]])
+        cos, sin = float(dg @ dh), float(dg @ nh)
+        c0, o0 = float((ag - ah) @ dh), float((ag - ah) @ nh)
+        slope = sin / cos + sp.offset_slope
+        ends = sorted((c0 + sp.s_from * cos, c0 + sp.s_to * cos))
+        spans.append(dataclasses.replace(sp, conductor=j, wire=wire_map[(sp.conductor, sp.wire)], s0=c0 + sp.s0 * cos,
+                                         c=sp.c * abs(cos), s_from=ends[0], s_to=ends[1], offset_slope=slope,
+                                         offset=o0 + sp.offset * cos - c0 * slope))
+    for k in np.flatnonzero(np.isin(line_of2, list(along))):
+        key = (int(line_of2[k]), int(wire2[k]))
+        if key not in wire_map:
+            wire_map[key] = next_wire[along[key[0]]]
+            next_wire[along[key[0]]] += 1
+        line_of[pos[k]], wire_of_pt[pos[k]] = along[key[0]], wire_map[key]
+    geo = list(geo)
+    cond = lines["conductors"].copy()
+    for j in set(along.values()):
+        a, d, t0, t1 = geo[j]
+        t0 = min([t0] + [sp.s_from for sp in spans if sp.conductor == j])
+        t1 = max([t1] + [sp.s_to for sp in spans if sp.conductor == j])
+        geo[j] = (a, d, t0, t1)
+        cond.loc[cond.index[j], "geometry"] = LineString([(a + t0 * d) / hu, (a + t1 * d) / hu])
+    return spans, geo, {**lines, "conductors": cond}
 
 
 def _along(g, h, band_m: float, max_angle_deg: float = 1.0) -> bool:
