@@ -399,7 +399,7 @@ def test_a_second_pass_line_along_a_first_is_folded_into_it():
     geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 100.0)]
     geo2 = [(np.array([110.0, 0.2]), dg, 0.0, 40.0)]
     sp = Span(0, 0, 0, 20.0, 500.0, 10.0, 0.0, 40.0, 0.03, 50, 0.4, 0.05, 0.001, 0.03)
-    lines = {"conductors": gpd.GeoDataFrame({"votes": [100]}, geometry=[LineString([(0, 0), (100, 0)])])}
+    lines = {"conductors": gpd.GeoDataFrame({"votes": [100], "length_m": [100.0]}, geometry=[LineString([(0, 0), (100, 0)])])}
     spans = [Span(0, 0, 0, 50.0, 800.0, 12.0, 0.0, 100.0, 0.03, 200, 1.0)]
     line_of, wire_of = np.array([0, 0, -1, -1, -1]), np.array([0, 0, -1, -1, -1])
     pos = np.array([2, 3, 4])  # where pass 2's points sit
@@ -417,6 +417,7 @@ def test_a_second_pass_line_along_a_first_is_folded_into_it():
     assert q.s_from == pytest.approx(s_h.min(), abs=1e-3) and q.s_to == pytest.approx(s_h.max(), abs=1e-3)
     assert geo[0][3] == pytest.approx(s_h.max(), abs=1e-3)
     assert lines["conductors"].geometry[0].length == pytest.approx(s_h.max(), abs=1e-3)
+    assert lines["conductors"].length_m[0] == pytest.approx(s_h.max(), abs=1e-3)
 
 
 def test_points_of_a_crown_that_line_up_are_no_conductor():

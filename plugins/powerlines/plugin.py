@@ -402,6 +402,8 @@ def _fold_into(along: dict, geo2, spans2, line_of2, wire2, geo, spans, lines, li
         t1 = max([t1] + [sp.s_to for sp in spans if sp.conductor == j])
         geo[j] = (a, d, t0, t1)
         cond.loc[cond.index[j], "geometry"] = LineString([(a + t0 * d) / hu, (a + t1 * d) / hu])
+        if "length_m" in cond.columns:
+            cond.loc[cond.index[j], "length_m"] = t1 - t0
     return spans, geo, {**lines, "conductors": cond}
 
 
