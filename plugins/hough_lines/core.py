@@ -344,10 +344,8 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
     offset = np.abs(np.einsum("ik,ijk->ij", normal, p[None, :, :] - p[:, None, :]))  # of j from line i
     close = (np.abs(d @ d.T) >= cos_lim) & (offset <= merge_offset_m)
     for i, j in zip(*np.nonzero(np.triu(close, k=1))):
-        a, b = found[i], found[j]
         # they must overlap or nearly touch along the line (tile overlap, a pylon's gap)
-        ends = sorted(float(np.dot(b.anchor + t * b.direction - a.anchor, a.direction)) for t in b.t_range)
-        if ends[0] > a.t_range[1] + merge_gap_m or ends[1] < a.t_range[0] - merge_gap_m:
+        if _apart_along(found[i], found[j], merge_gap_m):
             continue
         parent[root(j)] = root(i)
     groups: dict[int, list[int]] = {}
@@ -382,6 +380,13 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
     return merge_pieces_on_lines(out, x, y, v_max, s_min, merge_angle_deg, merge_offset_m, merge_gap_m)
 
 
+def _apart_along(a, b, gap_m: float) -> bool:
+    """Whether conductor ``b``'s extent, projected on ``a``'s line, stays more than ``gap_m``
+    from ``a``'s extent."""
+    ends = sorted(float(np.dot(b.anchor + t * b.direction - a.anchor, a.direction)) for t in b.t_range)
+    return ends[0] > a.t_range[1] + gap_m or ends[1] < a.t_range[0] - gap_m
+
+
 def _refit(x, y, members, votes: int, v_max: float, s_min: float):
     """A Conductor refitted on the points ``members`` (None: no validated run)."""
     anchor, direction, rms = fit_line(x[members], y[members], v_max)
@@ -408,10 +413,8 @@ def merge_pieces_on_lines(lines, x, y, v_max: float, s_min: float, merge_angle_d
             if np.ptp(b.t_range) > np.ptp(a.t_range) or abs(float(a.direction @ b.direction)) < cos_lim:
                 continue
             nrm = np.array([-a.direction[1], a.direction[0]])
-            ends = [b.anchor + t * b.direction for t in b.t_range]
-            along = sorted(float((e - a.anchor) @ a.direction) for e in ends)
-            if any(abs(float((e - a.anchor) @ nrm)) > merge_offset_m for e in ends) or \
-                    along[0] > a.t_range[1] + merge_gap_m or along[1] < a.t_range[0] - merge_gap_m:
+            if any(abs(float((b.anchor + t * b.direction - a.anchor) @ nrm)) > merge_offset_m for t in b.t_range) or \
+                    _apart_along(a, b, merge_gap_m):
                 continue
             both = _refit(x, y, np.unique(np.r_[a.members, b.members]), a.votes + b.votes, v_max, s_min)
             if both is not None and both.rms <= merge_offset_m:

@@ -425,8 +425,8 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
     # a catenary's slope grows by window / c between the two windows; a jump far beyond what
     # the slackest wire (c >= min_c_m) gives is a kink at an attachment point too (a span
     # climbing an embankment from a pole at its foot)
-    kink = np.where(drop > 0, drop, -drop - window_m / min_c_m)
-    cand = np.isfinite(drop) & (((drop > 0) & (drop > min_drop)) | ((drop < 0) & (kink > 0)))
+    kink = np.where(drop > 0, drop, -drop - window_m / min_c_m)  # how far past each threshold
+    cand = np.isfinite(drop) & ((drop > min_drop) | (-drop > window_m / min_c_m))
     cuts = []
     for i in np.flatnonzero(cand)[np.argsort(-kink[cand])]:
         if all(abs(pos[i] - c) >= min_span for c in cuts):
@@ -574,6 +574,23 @@ def _span(line: int, wire: int, number: int, s, off, fit) -> Span:
     o1, o0 = line_fit(s, off) if len(s) >= 3 else (0.0, float(np.median(off)))
     o_rms = float(np.sqrt(np.mean((off - o1 * s - o0) ** 2)))
     return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms)
+
+
+def span_in_frame(sp: Span, line_from, line_to, conductor: int, wire: int) -> Span:
+    """The span ``sp`` of line ``line_from`` re-expressed along ``line_to`` (both (anchor,
+    direction, t0, t1), within a few degrees of each other): the same catenary and plan trend,
+    as the span ``wire`` of ``conductor``."""
+    import dataclasses
+
+    (ag, dg, _, _), (ah, dh, _, _) = line_from, line_to
+    nh = np.array([-dh[1], dh[0]])
+    cos, sin = float(dg @ dh), float(dg @ nh)
+    c0, o0 = float((ag - ah) @ dh), float((ag - ah) @ nh)
+    slope = sin / cos + sp.offset_slope
+    ends = sorted((c0 + sp.s_from * cos, c0 + sp.s_to * cos))
+    return dataclasses.replace(sp, conductor=conductor, wire=wire, s0=c0 + sp.s0 * cos, c=sp.c * abs(cos),
+                               s_from=ends[0], s_to=ends[1], offset_slope=slope,
+                               offset=o0 + sp.offset * cos - c0 * slope)
 
 
 def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float, gap_m: float, tol_m: float = 0.1,
@@ -816,16 +833,18 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, 
         for k in np.flatnonzero(np.bincount(lab) >= 2 * min_points):
             m = np.flatnonzero(lab == k)
             slope, icpt = line_fit(s[m], off[m])
-            best = None
-            for r in (off[m] - slope * s[m] - icpt, _height_residual(s[m], z[m], window_m) if z is not None else None):
-                if r is None:
-                    continue
+            residuals = [off[m] - slope * s[m] - icpt]
+            if z is not None:
+                residuals.append(_height_residual(s[m], z[m], window_m))
+            best = None  # (clarity, upper group)
+            for r in residuals:
                 split = _two_means_1d(r, min_points)
                 if split is None:
                     continue
                 side, c0, c1, sd = split
-                if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd and (best is None or (c1 - c0) / sd > best[0]):
-                    best = ((c1 - c0) / max(sd, 1e-9), side)
+                clarity = (c1 - c0) / max(sd, 1e-9)
+                if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd and (best is None or clarity > best[0]):
+                    best = (clarity, side)
             if best is not None:
                 lab[m[best[1]]] = nxt
                 nxt += 1
@@ -852,7 +871,7 @@ def _height_residual(s, z, window_m: float) -> np.ndarray:
     if split is not None:
         side, c0, c1, _ = split
         level = np.where(side, c1, c0)  # each point's group centre
-        r = z - level - running_mean(z - level) + level
+        r = z - running_mean(z - level)
     return r
 
 

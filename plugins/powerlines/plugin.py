@@ -80,9 +80,11 @@ def _run(inputs, params, ctx):
             # a line along one found already is the rest of its points (near a tower, a sparse
             # stretch, past the end of its 2D extent), not another conductor: its wires are folded
             # into that line's
-            along = {i: j for i, g in enumerate(geo2) for j in [next((j for j, h in enumerate(geo)
-                                                                      if _along(g, h, params["band_m"])), None)]
-                     if j is not None}
+            along = {}  # pass-2 line -> the pass-1 line it runs along
+            for i, g in enumerate(geo2):
+                j = next((j for j, h in enumerate(geo) if _along(g, h, params["band_m"])), None)
+                if j is not None:
+                    along[i] = j
             pos = np.flatnonzero(line_of < 0)  # where pass 2's points sit among pass 1's
             if along:
                 spans, geo, lines = _fold_into(along, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of,
@@ -100,22 +102,15 @@ def _run(inputs, params, ctx):
             lines = _append_conductors(lines, lines2, n0)
         timings["second_pass_s"] = time.perf_counter() - t
 
-    # candidates the shape test left out as steep that lie on a fitted span are its points too
-    # (next to a pole top a wire point's neighbourhood leans on the pole)
-    steep_idx = idx[steep]
-    steep_line, steep_wire = points_on_spans(spans, geo, pc.x[steep_idx] * hu, pc.y[steep_idx] * hu,
-                                             pc.z[steep_idx] * vu, params["max_rms_3d_m"])
-    on = steep_line >= 0
-    keep = np.r_[keep, steep_idx[on]]
-    line_of, wire_of_pt = np.r_[line_of, steep_line[on]], np.r_[wire_of_pt, steep_wire[on]]
-    # and those it left out as flat or rough that lie right on one (within 0.1 m in plan): where
-    # a ribbon's phases or a crown beside the wire shared their neighbourhood
-    other = idx[~linear & ~steep]
-    o_line, o_wire = points_on_spans(spans, geo, pc.x[other] * hu, pc.y[other] * hu, pc.z[other] * vu,
-                                     params["max_rms_3d_m"], lateral_m=0.1)
-    on = o_line >= 0
-    keep = np.r_[keep, other[on]]
-    line_of, wire_of_pt = np.r_[line_of, o_line[on]], np.r_[wire_of_pt, o_wire[on]]
+    # candidates the shape test left out that lie on a fitted span are its points too: steep ones
+    # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
+    # right on it, within 0.1 m in plan (a ribbon's phases or a crown shared their neighbourhood)
+    for more, lateral_m in ((idx[steep], 0.25), (idx[~linear & ~steep], 0.1)):
+        m_line, m_wire = points_on_spans(spans, geo, pc.x[more] * hu, pc.y[more] * hu, pc.z[more] * vu,
+                                         params["max_rms_3d_m"], lateral_m=lateral_m)
+        on = m_line >= 0
+        keep = np.r_[keep, more[on]]
+        line_of, wire_of_pt = np.r_[line_of, m_line[on]], np.r_[wire_of_pt, m_wire[on]]
 
     # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
     # volume, points of a crown that line up
@@ -365,10 +360,10 @@ def _fold_into(along: dict, geo2, spans2, line_of2, wire2, geo, spans, lines, li
     their spans re-expressed in the pass-1 line's frame as new wires of it, their points (``pos``:
     where pass 2's per-point arrays sit in the pass-1 ones) given to it, and its 2D extent and
     plan line stretched over them. Returns (spans, geo, lines)."""
-    import dataclasses
-
     import numpy as np
     from shapely.geometry import LineString
+
+    from .core import span_in_frame
 
     next_wire = {j: max([sp.wire for sp in spans if sp.conductor == j], default=-1) + 1 for j in set(along.values())}
     wire_map, spans = {}, list(spans)
@@ -379,15 +374,7 @@ def _fold_into(along: dict, geo2, spans2, line_of2, wire2, geo, spans, lines, li
         if (sp.conductor, sp.wire) not in wire_map:
             wire_map[(sp.conductor, sp.wire)] = next_wire[j]
             next_wire[j] += 1
-        (ag, dg, _, _), (ah, dh, _, _) = geo2[sp.conductor], geo[j]
-        nh = np.array([-dh[1], dh[0]])
-        cos, sin = float(dg @ dh), float(dg @ nh)
-        c0, o0 = float((ag - ah) @ dh), float((ag - ah) @ nh)
-        slope = sin / cos + sp.offset_slope
-        ends = sorted((c0 + sp.s_from * cos, c0 + sp.s_to * cos))
-        spans.append(dataclasses.replace(sp, conductor=j, wire=wire_map[(sp.conductor, sp.wire)], s0=c0 + sp.s0 * cos,
-                                         c=sp.c * abs(cos), s_from=ends[0], s_to=ends[1], offset_slope=slope,
-                                         offset=o0 + sp.offset * cos - c0 * slope))
+        spans.append(span_in_frame(sp, geo2[sp.conductor], geo[j], j, wire_map[(sp.conductor, sp.wire)]))
     for k in np.flatnonzero(np.isin(line_of2, list(along))):
         key = (int(line_of2[k]), int(wire2[k]))
         if key not in wire_map:
