@@ -169,6 +169,12 @@ def test_roof_lines_lie_on_both_truth_faces(roof_scene, tmp_path):
         if b["roof"] == "gable":
             assert list(mine.kind) == ["ridge"]
     assert len(lines) >= 10
+    import sqlite3
+
+    con = sqlite3.connect(tmp_path / "p.gpkg")
+    qml = dict(con.execute("SELECT f_table_name, styleQML FROM layer_styles WHERE useAsDefault = 1").fetchall())
+    assert {"roof_planes", "roof_lines"} <= set(qml)
+    assert all(f'value="{k}"' in qml["roof_lines"] for k in set(lines.kind))  # a colour for every kind written
     for row in lines[lines.kind != "step"].itertuples():  # a step is a wall: its line is on the upper face only
         fa, fb = face_of(row.plane_a), face_of(row.plane_b)
         for xyz in np.asarray(row.geometry.coords):

@@ -133,6 +133,10 @@ def _run(inputs, params, ctx):
                      n_features=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
     found, cand_scores = [], []
     for xy in ctx.progress(list(rough), desc="pose search", unit="pylon"):
+        # a candidate this close to a pylon already found would converge onto it
+        if any(np.hypot(*(r.pose[:2] - xy[:2])) <= params["radius_m"] for _, r in found):
+            cand_scores.append(None)
+            continue
         best = None
         for name, (a, b, h, sym) in models.items():
             r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
@@ -142,7 +146,12 @@ def _run(inputs, params, ctx):
         cand_scores.append(best[1].score if best is not None else 0.0)
         if best is not None and best[1].score >= params["min_score"] and np.isfinite(best[1].mad).all():
             found.append(best)
-    stats["candidate_scores"] = [round(c, 3) for c in cand_scores]
+    kept = []  # two searches that ended on one pylon: the better-scoring one stays
+    for name, r in sorted(found, key=lambda f: -f[1].score):
+        if all(np.hypot(*(r.pose[:2] - q.pose[:2])) > params["radius_m"] for _, q in kept):
+            kept.append((name, r))
+    found = kept
+    stats["candidate_scores"] = [None if c is None else round(c, 3) for c in cand_scores]
     stats["n_pylons"] = len(found)
     stats["scores"] = [round(r.score, 3) for _, r in found]
     layers = _layers(found, models, origin, dem.crs)
@@ -164,7 +173,8 @@ def _layers(found, models, origin, crs):
         rows.append({"heading_deg": round(float(h), 3), "roll_deg": round(float(ro), 3), "pitch_deg": round(float(p), 3),
                      "score": round(r.score, 4), "mad_x_m": round(float(r.mad[0]), 3), "mad_y_m": round(float(r.mad[1]), 3),
                      "mad_z_m": round(float(r.mad[2]), 3), "mad_heading_deg": round(float(r.mad[3]), 3),
-                     "n_photos": int(r.n_photos), "model": name})
+                     "n_photos": int(r.n_photos), "rms_px": round(float(r.rms_px), 3),
+                     "edge_share": round(float(r.edge_share), 3), "model": name})
         pts.append(Point(*X))
         a, b = models[name][0], models[name][1]
         ends = np.vstack([a, b])
@@ -177,7 +187,8 @@ def _layers(found, models, origin, crs):
             feet.append(Polygon(W[:, :2]))
         else:
             feet.append(None)
-    cols = ["heading_deg", "roll_deg", "pitch_deg", "score", "mad_x_m", "mad_y_m", "mad_z_m", "mad_heading_deg", "n_photos", "model"]
+    cols = ["heading_deg", "roll_deg", "pitch_deg", "score", "mad_x_m", "mad_y_m", "mad_z_m", "mad_heading_deg", "n_photos",
+            "rms_px", "edge_share", "model"]
     import pandas as pd
 
     df = pd.DataFrame(rows, columns=cols)
@@ -233,8 +244,11 @@ def toolbox_algorithms():
             "among them, their rays voted into "
             "terrain columns (a pylon where at least min_photos photos agree), then a render-and-compare search of "
             "the pylon model's beams against each photo's segments (the similarity A_s, a taichi kernel): coarse "
-            "exhaustive, finer, the method's MatchSeparate with MAD-weighted merging across photos, and a joint "
-            "refinement. With a model library (a folder of OBJ/JSON models) the type is chosen per pylon by score. "
+            "exhaustive, finer, the method's MatchSeparate with MAD-weighted merging across photos, a joint "
+            "refinement, and last a continuous one past the similarity's cells: points along the projected beams "
+            "matched to the two edges LSD finds of each beam, the 6 pose parameters solved by robust least squares "
+            "over all photos (rms_px, edge_share in the layer). Two searches that end within radius_m of each "
+            "other are one pylon. With a model library (a folder of OBJ/JSON models) the type is chosen per pylon by score. "
             "World convention: x east, y north, z up in the DEM's CRS; X_cam = R·X_world + t (COLMAP); pose M = "
             "T·Rz(heading)·Ry(pitch)·Rx(roll) on model coordinates whose origin is the centre of the base; angles "
             "counter-clockwise in degrees, heading 0 leaves the model's x axis pointing east."
@@ -252,7 +266,7 @@ def toolbox_algorithms():
                       "for that photo's vote (auto: 3 corners, 1 triangle)", minimum=1, maximum=100, allow_auto=True),
             Parameter("min_vote_share", float, 0.6, "detection: share of the photos that see a column which must "
                       "vote for it", minimum=0.0, maximum=1.0),
-            Parameter("min_score", float, 0.05, "share of the model's beam cells that must match photo segments "
+            Parameter("min_score", float, 0.042, "share of the model's beam cells that must match photo segments "
                       "of their direction at the found pose; below it a candidate is no pylon", minimum=0.0, maximum=1.0),
             Parameter("mode", str, "max", "direction smoothing of the photo descriptor: max (the thesis's text) or "
                       "sum (its listing)", choices=("max", "sum")),
@@ -269,8 +283,9 @@ def toolbox_algorithms():
         ],
         outputs=[
             Output("pylons", "vector", "layers pylons (PointZ at the base: heading_deg, roll_deg, pitch_deg, score, "
-                   "mad_x_m, mad_y_m, mad_z_m, mad_heading_deg, n_photos, model) and pylon_footprints (the model's "
-                   "base at the found pose)"),
+                   "mad_x_m, mad_y_m, mad_z_m, mad_heading_deg, n_photos, rms_px: the matched beam points' distance "
+                   "to their photo edges, edge_share: their share of the beam points in view, model) and "
+                   "pylon_footprints (the model's base at the found pose)"),
             Output("overlays", "folder", "overlays/*.png: each photo with the found pylons drawn (half size), to check "
                    "by eye", optional=True),
         ],

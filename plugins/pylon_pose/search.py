@@ -330,6 +330,9 @@ class PoseResult:
     mad: np.ndarray  # MADs of x, y, z (m) and heading (deg) from the per-photo merge
     n_photos: int
     per_photo: np.ndarray  # normalised score in each photo used
+    n_edge_points: int = 0  # beam points matched to segment edge pairs in the last refinement
+    rms_px: float = float("nan")  # their RMS distance to the edge pairs' midlines
+    edge_share: float = 0.0  # their share of the model's beam points in view
 
 
 def _rois(views, centre, radius_m, height_m, cell_px, mode):
@@ -378,11 +381,13 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     vB, rB = _rois(views, c0, radius_m + extent + 2.0, height_m, 8, mode)
     best, best_s = None, -1.0
     for s in seeds:
-        cand = grid(s, [1.5, 1.5, 0.5, 4.0, 0, 0], [0.25, 0.25, 0.25, 1.0, 1, 1])
+        cand = grid(s, [1.5, 1.5, 0.5, 4.0, 0, 0], [0.5, 0.5, 0.5, 2.0, 1, 1])
         sc = score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)
         i = int(np.argmax(sc))
         if sc[i] > best_s:
             best, best_s = cand[i].copy(), float(sc[i])
+    cand = grid(best, [0.25, 0.25, 0.25, 1.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
+    best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
     step("fine")
     per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
     norm = np.array([max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)])
@@ -422,12 +427,186 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         rot = grid(pose, [0, 0, 0, min(max(mad[3], 0.25), 1.0), 0.1, 0.1], [1, 1, 1, 0.125, 0.05, 0.05])
         sc = score_poses(vC, rC, rot, a, b, kernel).sum(axis=0)
         pose = rot[int(np.argmax(sc))].copy()
+    step("joint")
+    # E: A_s stops at its 4 px cells; the segments themselves carry the pose to a fraction of a pixel
+    refined, n_edge, rms, share = refine_on_segments(vC, pose, a, b)
+    if np.all(np.abs(refined[:3] - pose[:3]) <= 0.5) and np.all(np.abs(refined[3:] - pose[3:]) <= 1.0):
+        pose = refined
     per = score_poses(vC, rC, pose[None], a, b, kernel)[:, 0]
     norm = np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(vC, rC)])
     per = per / norm
     pose[3] = pose[3] % period
-    step("joint")
-    return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per)
+    step("refine")
+    return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share)
+
+
+# ----------------------------------------------------------------------------------------------
+# Continuous refinement on the photos' segments
+# ----------------------------------------------------------------------------------------------
+
+def _beam_samples(view: View, pose: np.ndarray, a: np.ndarray, b: np.ndarray, step_px: float):
+    """Points along the model's beams about ``step_px`` apart in this photo at ``pose``: (beam
+    index, fraction along it); beams with an end behind the camera are left out."""
+    R = core.rotation(pose[3], pose[4], pose[5])
+    ua, za = view.project(a @ R.T + pose[:3])
+    ub, zb = view.project(b @ R.T + pose[:3])
+    n = np.where((za > 1) & (zb > 1), np.maximum((np.linalg.norm(ub - ua, axis=1) / step_px).astype(int), 1), 0)
+    beam = np.repeat(np.arange(len(a)), n)
+    frac = (np.arange(len(beam)) - np.repeat(np.cumsum(n) - n, n) + 0.5) / np.repeat(n, n)
+    return beam, frac
+
+
+def _project_beam_points(view: View, pose: np.ndarray, a: np.ndarray, b: np.ndarray, beam, frac):
+    """Pixels of the beam points at ``pose`` and the beams' unit image directions there."""
+    R = core.rotation(pose[3], pose[4], pose[5])
+    D = (b[beam] - a[beam]) @ R.T
+    X = a[beam] @ R.T + frac[:, None] * D + pose[:3]
+    uv, _ = view.project(X)
+    uv2, _ = view.project(X + 1e-3 * D / np.linalg.norm(D, axis=1, keepdims=True))
+    d = uv2 - uv
+    return uv, d / (np.linalg.norm(d, axis=1, keepdims=True) + 1e-12)
+
+
+class SegmentIndex:
+    """A photo's line segments inside a pixel box, sampled every pixel into a k-d tree, to find
+    the segments of a given direction near a point."""
+
+    def __init__(self, seg: np.ndarray, box):
+        from scipy.spatial import cKDTree
+
+        x0, y0, x1, y1 = box
+        seg = seg[(np.maximum(seg[:, 0], seg[:, 2]) >= x0) & (np.minimum(seg[:, 0], seg[:, 2]) <= x1)
+                  & (np.maximum(seg[:, 1], seg[:, 3]) >= y0) & (np.minimum(seg[:, 1], seg[:, 3]) <= y1)]
+        p, q = seg[:, :2], seg[:, 2:]
+        self.length = np.linalg.norm(q - p, axis=1)
+        self.p = p
+        self.dir = (q - p) / np.maximum(self.length, 1e-9)[:, None]
+        self.normal = np.column_stack([-self.dir[:, 1], self.dir[:, 0]])
+        m = np.ceil(self.length / 1.5).astype(int) + 1  # tree points 1.5 px apart
+        self.sid = np.repeat(np.arange(len(seg)), m)
+        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in m]) if len(m) else np.empty(0)
+        self.tree = cKDTree(p[self.sid] + t[:, None] * (q - p)[self.sid]) if len(self.sid) else None
+
+    def edges(self, uv: np.ndarray, d: np.ndarray, radius_px: float, angle_deg: float, k: int = 16):
+        """For each point (with the beam's image direction d): the nearest segment within
+        ``radius_px`` on each side of it whose direction is within ``angle_deg`` and which spans
+        the point; (left, right) segment indices, -1 where there is none."""
+        n = len(uv)
+        none = np.full(n, -1)
+        if self.tree is None or not n:
+            return none, none.copy()
+        dist, j = self.tree.query(uv, k=k, distance_upper_bound=radius_px)
+        ok = np.isfinite(dist)
+        s = np.where(ok, self.sid[np.minimum(j, len(self.sid) - 1)], 0)
+        dirs = self.dir[s]
+        ok &= np.abs(np.einsum("nkc,nc->nk", dirs, d)) >= np.cos(np.radians(angle_deg))
+        rel = self.p[s] - uv[:, None, :]
+        along = -np.einsum("nkc,nkc->nk", rel, dirs)
+        ok &= (along >= -1.0) & (along <= self.length[s] + 1.0)
+        off = np.einsum("nkc,nc->nk", rel, np.column_stack([-d[:, 1], d[:, 0]]))
+        right = np.where(ok & (off >= 0), off, np.inf)
+        left = np.where(ok & (off < 0), -off, np.inf)
+        r = np.arange(n)
+        ir, il = np.argmin(right, axis=1), np.argmin(left, axis=1)
+        return (np.where(np.isfinite(left[r, il]), s[r, il], -1), np.where(np.isfinite(right[r, ir]), s[r, ir], -1))
+
+
+def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, radii_px=(6.0, 4.0, 3.0),
+                       step_px: float = 4.0, angle_deg: float = 5.0, f_scale_px: float = 1.0,
+                       shift_grid=None, tilt_grid_deg=(0.6, 0.2), count_radius_px: float = 2.0,
+                       max_rematch: int = 4):
+    """Continuous refinement of a pose (x, y, z, heading, pitch, roll) against the photos' segments,
+    past the resolution of the A_s cells: points every ``step_px`` along each projected beam are
+    matched to the nearest segment of the beam's direction on either side (a beam wider than a
+    pixel gives LSD its two edges), and the 6 pose parameters minimise the distances of the points
+    to the midlines of their edge pairs over all photos (robust Huber loss, ``f_scale_px``);
+    matching and solving alternate with the search radius shrinking through ``radii_px``. Then
+    shifts of ``shift_grid`` (± metres, step, ± degrees of heading, step) about the solution, and
+    the tilts of ``tilt_grid_deg`` (± half, step; pylons stand within half a degree of upright),
+    are tried, and the one holding the most edge pairs is solved again, each in turn; the solution with the most edge pairs within ``count_radius_px`` wins (the start
+    if none beats it). Returns (pose, edge pairs matched at the last radius, their RMS in pixels)."""
+    from scipy.optimize import least_squares
+
+    pose = np.asarray(pose, float).copy()
+    height = float(max(a[:, 2].max(), b[:, 2].max()))
+    extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
+    box = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (0, 1)], float) * [extent + 1, extent + 1, height + 1]
+    data = []
+    for v in views:
+        uv, z = v.project(pose[:3] + box)
+        if np.all(z > 1):
+            data.append((v, SegmentIndex(v.segments, (*uv.min(axis=0) - 10, *uv.max(axis=0) + 10))))
+
+    seen = [0]  # beam points in view at the last match
+
+    def match(x, radius, step=step_px):
+        rows = []
+        seen[0] = 0
+        for v, idx in data:
+            beam, frac = _beam_samples(v, x, a, b, step)
+            if not len(beam):
+                continue
+            uv, d = _project_beam_points(v, x, a, b, beam, frac)
+            left, right = idx.edges(uv, d, radius, angle_deg)
+            inside = (uv[:, 0] >= 0) & (uv[:, 0] < v.width) & (uv[:, 1] >= 0) & (uv[:, 1] < v.height)
+            seen[0] += int(inside.sum())
+            keep = (left >= 0) & (right >= 0) & inside
+            if keep.any():
+                sign = np.sign(np.einsum("ij,ij->i", idx.normal[left[keep]], idx.normal[right[keep]]))
+                rows.append((v, idx, beam[keep], frac[keep], left[keep], right[keep], sign))
+        return rows
+
+    def residuals(x, rows):
+        out = [np.zeros(0)]
+        for v, idx, beam, frac, left, right, sign in rows:
+            uv, _ = _project_beam_points(v, x, a, b, beam, frac)
+            r1 = np.einsum("ij,ij->i", uv - idx.p[left], idx.normal[left])
+            r2 = np.einsum("ij,ij->i", uv - idx.p[right], idx.normal[right])
+            out.append(0.5 * (r1 + sign * r2))  # offset from the midline of the two edges
+        return np.concatenate(out)
+
+    def count(x, step=step_px):
+        return sum(len(r[2]) for r in match(x, count_radius_px, step))
+
+    def solve(x, radii):
+        for radius in radii:
+            for _ in range(max_rematch):  # match, solve, match again until the pairs hold still
+                rows = match(x, radius)
+                if sum(len(r[2]) for r in rows) < 12:
+                    return x, count(x)
+                x_new = least_squares(residuals, x, args=(rows,), loss="huber", f_scale=f_scale_px, x_scale=0.05,
+                                      diff_step=1e-6).x
+                moved = np.abs(x_new - x)
+                x = x_new
+                if moved[:3].max() < 1e-3 and moved[3:].max() < 2e-3:
+                    break
+        return x, count(x)
+
+    best, n_best = pose.copy(), count(pose)
+    x, n = solve(pose, radii_px)
+    if n >= n_best:
+        best, n_best = x, n
+    # where the photos hold few of the beams, a start a few pixels off can slide to a neighbouring
+    # fit, and a tilt a few tenths of a degree off can hold as many beams as the right one at the wide
+    # radii (the top's beams caught by their neighbours): the edge pairs within count_radius_px
+    # over a grid of positions and headings, then of tilts, tell them apart
+    grids = []
+    if shift_grid is not None:
+        half_m, step_m, half_deg, step_deg = shift_grid
+        sh, hd = np.arange(-half_m, half_m + 1e-9, step_m), np.arange(-half_deg, half_deg + 1e-9, step_deg)
+        grids.append(lambda p: [pose + [dx, dy, 0, dh, 0, 0] for dx in sh for dy in sh for dh in hd])  # about the start
+    if tilt_grid_deg is not None:
+        tilts = np.arange(-tilt_grid_deg[0], tilt_grid_deg[0] + 1e-9, tilt_grid_deg[1])
+        grids.append(lambda p: [np.r_[p[:4], tp, tr] for tp in tilts for tr in tilts])
+    for make in grids:
+        cands = make(best)
+        counts = [count(g, 2 * step_px) for g in cands]
+        x, n = solve(cands[int(np.argmax(counts))], radii_px[1:])
+        if n > n_best:
+            best, n_best = x, n
+    rows = match(best, radii_px[-1])
+    res = residuals(best, rows)
+    return best, len(res), float(np.sqrt(np.mean(res ** 2))) if len(res) else float("nan"), len(res) / max(seen[0], 1)
 
 
 def photo_corners(seg: np.ndarray, max_length_px: np.ndarray, extend: float = 1.5, min_angle_deg: float = 15.0) -> np.ndarray:

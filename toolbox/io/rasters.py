@@ -43,14 +43,8 @@ class Raster:
     def sample(self, x, y) -> np.ndarray:
         """Bilinear value of band 1 at points x, y (cell centres; north-up grids). Nodata cells take
         the nearest valid value around them, so points at the data's edge still get a height."""
-        from scipy import ndimage
-
         t = self.transform
-        z = np.where(self.valid_mask(), self.bands()[0].astype(np.float64), np.nan)
-        if not np.isfinite(z).all():
-            bad = ~np.isfinite(z)
-            idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-            z = z[tuple(idx)]
+        z = self._filled_band()
         r = (t.f - y) / -t.e - 0.5
         c = (x - t.c) / t.a - 0.5
         rows, cols = z.shape
@@ -62,6 +56,22 @@ class Raster:
         r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
         return (z[r0, c0] * (1 - fr) * (1 - fc) + z[r0, c1] * (1 - fr) * fc
                 + z[r1, c0] * fr * (1 - fc) + z[r1, c1] * fr * fc)
+
+    def _filled_band(self) -> np.ndarray:
+        """Band 1 as float64 with nodata filled from the nearest valid cell; kept while ``data`` is
+        the same array (a search samples the same DEM thousands of times)."""
+        from scipy import ndimage
+
+        cached = self.__dict__.get("_filled")
+        if cached is not None and cached[0] is self.data:
+            return cached[1]
+        z = np.where(self.valid_mask(), self.bands()[0].astype(np.float64), np.nan)
+        if not np.isfinite(z).all():
+            bad = ~np.isfinite(z)
+            idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+            z = z[tuple(idx)]
+        self.__dict__["_filled"] = (self.data, z)
+        return z
 
     def valid_mask(self) -> np.ndarray:
         band = self.bands()[0]

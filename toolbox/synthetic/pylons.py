@@ -498,3 +498,22 @@ def survey_files(s: PhotoSurvey, progress=lambda it, **kw: it, workers: int = 2)
             write_obj(m, Path(tmp) / f"{name}.obj")
             files[f"models/{name}.obj"] = (Path(tmp) / f"{name}.obj").read_text(encoding="utf-8")
     return files
+
+
+def perturb_images(images: dict, position_m: float, angle_deg: float, seed: int = 0) -> dict:
+    """Copies of COLMAP images whose poses carry an alignment's error: each camera centre moved by
+    ``position_m`` and its orientation turned by ``angle_deg`` about a random axis (both exactly
+    those sizes, random directions), to test how a pose search copes with imperfect cameras."""
+    from scipy.spatial.transform import Rotation
+
+    from ..io.cameras import Image, quaternion_from_matrix
+
+    rng = np.random.default_rng(seed)
+    out = {}
+    for k, im in images.items():
+        axis, shift = rng.normal(size=3), rng.normal(size=3)
+        dR = Rotation.from_rotvec(np.radians(angle_deg) * axis / np.linalg.norm(axis)).as_matrix()
+        R = dR @ im.R
+        C = im.centre + position_m * shift / np.linalg.norm(shift)
+        out[k] = Image(im.id, im.name, im.camera_id, quaternion_from_matrix(R), -R @ C, dict(im.extra))
+    return out
