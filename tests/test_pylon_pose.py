@@ -335,3 +335,20 @@ def test_perturbed_cameras_are_off_by_exactly_the_given_amounts():
         assert abs(np.linalg.norm(moved[k].centre - im.centre) - 0.05) < 1e-9
         turn = np.degrees(np.arccos(np.clip((np.trace(moved[k].R @ im.R.T) - 1) / 2, -1, 1)))
         assert abs(turn - 0.05) < 1e-6
+
+
+def test_canonical_pose_turns_pitch_and_roll_with_the_heading():
+    """A 180-degree-symmetric tower written half a turn round keeps its vertical axis: heading -2.6
+    with pitch 0.08, roll -0.09 is heading 177.4 with pitch -0.08, roll 0.09 (only wrapping the
+    heading would lean it 0.24 degrees the other way)."""
+    for pose, sym in [([1, 2, 3, -2.6, 0.08, -0.09], 180.0), ([0, 0, 0, 357.5, 0.1, 0.2], 90.0),
+                      ([0, 0, 0, 400.0, 0.3, -0.1], 360.0), ([0, 0, 0, -1e-13, 0.1, 0.2], 180.0)]:
+        q = core.canonical_pose(np.array(pose, float), sym)
+        assert 0 <= q[3] < sym and np.array_equal(q[:3], pose[:3])
+        R0, R1 = core.rotation(*pose[3:]), core.rotation(*q[3:])
+        np.testing.assert_allclose(R1[:, 2], R0[:, 2], atol=1e-12)  # the same vertical axis
+        turns = R0.T @ R1  # a whole number of symmetry steps about z
+        k = np.degrees(np.arctan2(turns[1, 0], turns[0, 0])) / sym
+        assert abs(k - round(k)) < 1e-9 and np.allclose(turns[2], [0, 0, 1], atol=1e-12)
+    q = core.canonical_pose(np.array([0, 0, 0, -2.6, 0.08, -0.09]), 180.0)
+    np.testing.assert_allclose(q[3:], [177.4, -0.08, 0.09], atol=1e-3)

@@ -85,3 +85,27 @@ def similarity(b: np.ndarray, table: np.ndarray, P: np.ndarray, seg_a: np.ndarra
     if kernel is not None:
         return kernel(b, P, seg_a, seg_b, cell_px, table)
     return reference.similarity(b, P, seg_a, seg_b, cell_px, table)
+
+
+def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
+    """(heading, pitch, roll) in degrees of R = Rz(heading)·Ry(pitch)·Rx(roll), heading in [0, 360)."""
+    heading = np.degrees(np.arctan2(R[1, 0], R[0, 0])) % 360.0
+    pitch = np.degrees(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    roll = np.degrees(np.arctan2(R[2, 1], R[2, 2]))
+    return float(heading), float(pitch), float(roll)
+
+
+def canonical_pose(pose: np.ndarray, symmetry_deg: float) -> np.ndarray:
+    """The same placement of a model symmetric under turns of ``symmetry_deg`` about its z axis,
+    written with the heading in [0, symmetry_deg): the model turned by whole symmetry steps, so
+    that pitch and roll change with it (half a turn round, a 180-degree-symmetric tower has pitch
+    and roll of the opposite sign)."""
+    pose = np.asarray(pose, float).copy()
+    if symmetry_deg >= 360.0:
+        pose[3] %= 360.0
+        return pose
+    k = -np.floor(pose[3] / symmetry_deg + 1e-12)
+    R = rotation(pose[3], pose[4], pose[5]) @ rotation(k * symmetry_deg, 0.0, 0.0)
+    h, p, r = euler_from_rotation(R)
+    pose[3:] = [0.0 if h > 360.0 - 1e-9 else h, p, r]  # a hair below 0 comes back as nearly 360
+    return pose

@@ -435,7 +435,7 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     per = score_poses(vC, rC, pose[None], a, b, kernel)[:, 0]
     norm = np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(vC, rC)])
     per = per / norm
-    pose[3] = pose[3] % period
+    pose = core.canonical_pose(pose, period)
     step("refine")
     return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share)
 
@@ -513,18 +513,20 @@ class SegmentIndex:
 
 def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, radii_px=(6.0, 4.0, 3.0),
                        step_px: float = 4.0, angle_deg: float = 5.0, f_scale_px: float = 1.0,
-                       shift_grid=None, tilt_grid_deg=(0.6, 0.2), count_radius_px: float = 2.0,
+                       tilt_grid_deg=(0.6, 0.2), count_radius_px: float = 2.0,
                        max_rematch: int = 4):
     """Continuous refinement of a pose (x, y, z, heading, pitch, roll) against the photos' segments,
     past the resolution of the A_s cells: points every ``step_px`` along each projected beam are
     matched to the nearest segment of the beam's direction on either side (a beam wider than a
     pixel gives LSD its two edges), and the 6 pose parameters minimise the distances of the points
-    to the midlines of their edge pairs over all photos (robust Huber loss, ``f_scale_px``);
-    matching and solving alternate with the search radius shrinking through ``radii_px``. Then
-    shifts of ``shift_grid`` (± metres, step, ± degrees of heading, step) about the solution, and
-    the tilts of ``tilt_grid_deg`` (± half, step; pylons stand within half a degree of upright),
-    are tried, and the one holding the most edge pairs is solved again, each in turn; the solution with the most edge pairs within ``count_radius_px`` wins (the start
-    if none beats it). Returns (pose, edge pairs matched at the last radius, their RMS in pixels)."""
+    to the midlines of their edge pairs over all photos (robust Huber loss, ``f_scale_px``).
+    Matching and solving alternate (up to ``max_rematch`` times per radius, until the pairs hold
+    still) with the search radius shrinking through ``radii_px``. Then the tilts of
+    ``tilt_grid_deg`` (± half, step; pylons stand within half a degree of upright) are tried at the
+    solved position and heading, and the one holding the most edge pairs is solved again. The
+    solution with the most edge pairs within ``count_radius_px`` wins (the start if none beats it).
+    Returns (pose, beam points matched to edge pairs at the last radius, their RMS distance in
+    pixels, their share of the beam points in view)."""
     from scipy.optimize import least_squares
 
     pose = np.asarray(pose, float).copy()
@@ -586,20 +588,12 @@ def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, ra
     x, n = solve(pose, radii_px)
     if n >= n_best:
         best, n_best = x, n
-    # where the photos hold few of the beams, a start a few pixels off can slide to a neighbouring
-    # fit, and a tilt a few tenths of a degree off can hold as many beams as the right one at the wide
-    # radii (the top's beams caught by their neighbours): the edge pairs within count_radius_px
-    # over a grid of positions and headings, then of tilts, tell them apart
-    grids = []
-    if shift_grid is not None:
-        half_m, step_m, half_deg, step_deg = shift_grid
-        sh, hd = np.arange(-half_m, half_m + 1e-9, step_m), np.arange(-half_deg, half_deg + 1e-9, step_deg)
-        grids.append(lambda p: [pose + [dx, dy, 0, dh, 0, 0] for dx in sh for dy in sh for dh in hd])  # about the start
     if tilt_grid_deg is not None:
+        # a tilt a few tenths of a degree off can hold as many beams as the right one at the wide radii
+        # (the top's beams caught by their neighbours); edge pairs within count_radius_px over a grid of
+        # tilts tell them apart
         tilts = np.arange(-tilt_grid_deg[0], tilt_grid_deg[0] + 1e-9, tilt_grid_deg[1])
-        grids.append(lambda p: [np.r_[p[:4], tp, tr] for tp in tilts for tr in tilts])
-    for make in grids:
-        cands = make(best)
+        cands = [np.r_[best[:4], tp, tr] for tp in tilts for tr in tilts]
         counts = [count(g, 2 * step_px) for g in cands]
         x, n = solve(cands[int(np.argmax(counts))], radii_px[1:])
         if n > n_best:
