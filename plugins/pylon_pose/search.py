@@ -468,7 +468,7 @@ def _project_beam_points(view: View, pose: np.ndarray, a: np.ndarray, b: np.ndar
 
 
 class SegmentIndex:
-    """A photo's line segments inside a pixel box, sampled every pixel into a k-d tree, to find
+    """A photo's line segments inside a pixel box, sampled every 1.5 px into a k-d tree, to find
     the segments of a given direction near a point."""
 
     def __init__(self, seg: np.ndarray, box):
