@@ -190,14 +190,18 @@ class RoiDescriptor:
     perfect: int  # b's value for a cell whose direction matches exactly
 
 
+def column_corners(centre: np.ndarray, half_m: float, height_m: float) -> np.ndarray:
+    """The 8 corners of the box ``centre`` ± ``half_m`` across, from its base up ``height_m``."""
+    unit = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (0, 1)], float)
+    return np.asarray(centre, float) + unit * [half_m, half_m, height_m]
+
+
 def roi_descriptor(view: View, centre: np.ndarray, radius_m: float, height_m: float, cell_px: int,
                    mode: str = "max") -> RoiDescriptor | None:
     """The photo's descriptor b on a region of interest around a pylon standing at ``centre``
     (local frame) ± ``radius_m``: the box of the projections of that volume, K shifted to it (the
     method's ROI: cx, cy move). None when the volume is not in front of the camera or not in view."""
-    corners = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (0, 1)], float)
-    corners = centre + corners * [radius_m, radius_m, height_m]
-    uv, depth = view.project(corners)
+    uv, depth = view.project(column_corners(centre, radius_m, height_m))
     if np.any(depth <= 1.0):
         return None
     x0, y0 = np.floor(np.maximum(uv.min(axis=0), 0) / cell_px).astype(int) * cell_px
@@ -532,10 +536,10 @@ def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, ra
     pose = np.asarray(pose, float).copy()
     height = float(max(a[:, 2].max(), b[:, 2].max()))
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
-    box = np.array([[dx, dy, dz] for dx in (-1, 1) for dy in (-1, 1) for dz in (0, 1)], float) * [extent + 1, extent + 1, height + 1]
+    box = column_corners(pose[:3], extent + 1, height + 1)
     data = []
     for v in views:
-        uv, z = v.project(pose[:3] + box)
+        uv, z = v.project(box)
         if np.all(z > 1):
             data.append((v, SegmentIndex(v.segments, (*uv.min(axis=0) - 10, *uv.max(axis=0) + 10))))
 

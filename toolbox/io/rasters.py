@@ -4,7 +4,7 @@ overviews) with a QGIS ``.qml`` sidecar so that QGIS opens them styled."""
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ class Raster:
     style: str | None = None
     source: str = ""
     description: str = ""
+    _filled: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def cell_size(self) -> float:
@@ -62,15 +63,14 @@ class Raster:
         the same array (a search samples the same DEM thousands of times)."""
         from scipy import ndimage
 
-        cached = self.__dict__.get("_filled")
-        if cached is not None and cached[0] is self.data:
-            return cached[1]
+        if self._filled is not None and self._filled[0] is self.data:
+            return self._filled[1]
         z = np.where(self.valid_mask(), self.bands()[0].astype(np.float64), np.nan)
         if not np.isfinite(z).all():
             bad = ~np.isfinite(z)
             idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
             z = z[tuple(idx)]
-        self.__dict__["_filled"] = (self.data, z)
+        self._filled = (self.data, z)
         return z
 
     def valid_mask(self) -> np.ndarray:
