@@ -104,7 +104,8 @@ def _run(inputs, params, ctx):
     views = _views(inputs["photos"], cameras, images, origin, ctx)
     height = max(m[2] for m in models.values())
     kernel = TaichiSimilarity(taichi())
-    stats = {"n_photos": len(views), "model_types": sorted(models), "search_radius_m": params["radius_m"]}
+    stats = {"n_photos": len(views), "model_types": sorted(models), "search_radius_m": params["radius_m"],
+             "hypotheses": params["hypotheses"]}
     if inputs.get("rough") is not None:
         layer = next(iter(inputs["rough"].values())) if isinstance(inputs["rough"], dict) else inputs["rough"]
         rough = np.array([[g.x - origin[0], g.y - origin[1], 0.0] for g in layer.geometry if g is not None], float)
@@ -140,7 +141,7 @@ def _run(inputs, params, ctx):
         best = None
         for name, (a, b, h, sym) in models.items():
             r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
-                                 min_score=params["min_score"])
+                                 min_score=params["min_score"], hypotheses=params["hypotheses"])
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
         cand_scores.append(best[1].score if best is not None else 0.0)
@@ -268,6 +269,10 @@ def toolbox_algorithms():
                       "vote for it", minimum=0.0, maximum=1.0),
             Parameter("min_score", float, 0.042, "share of the model's beam cells that must match photo segments "
                       "of their direction at the found pose; below it a candidate is no pylon", minimum=0.0, maximum=1.0),
+            Parameter("hypotheses", str, "grid", "first poses of the search: grid (an exhaustive x, y, heading search "
+                      "within radius_m, the method's fallback) or triangles (the method's MatchByTriangles: P3P on photo "
+                      "triangles matched to the model's, the grid where fewer than two photos give one)",
+                      choices=("grid", "triangles")),
             Parameter("mode", str, "max", "direction smoothing of the photo descriptor: max (the thesis's text) or "
                       "sum (its listing)", choices=("max", "sum")),
         ],

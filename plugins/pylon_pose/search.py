@@ -64,9 +64,9 @@ def ray_terrain(C: np.ndarray, d: np.ndarray, ground, above_m: float = 0.0, t_ma
 # Detection: triangles of line segments, clustered in each photo and across photos
 # ----------------------------------------------------------------------------------------------
 
-def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Shortest and longest side of the model's triangles: three beams meeting pairwise (at a
-    shared end or a crossing), sides between their meeting points."""
+def model_triangles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The model's triangles (T, 3, 3): three beams meeting pairwise (at a shared end or a
+    crossing), vertices at their meeting points."""
     n = len(a)
     P = np.full((n, n, 3), np.nan)
     d1 = d2 = b - a
@@ -88,7 +88,7 @@ def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
         hit[i] = False
         P[i, hit] = p[hit]
     adj = ~np.isnan(P[..., 0])
-    sides = []
+    tris = []
     for i in range(n):
         for j in np.nonzero(adj[i])[0]:
             if j <= i:
@@ -97,10 +97,15 @@ def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
                 if k <= j:
                     continue
                 v = np.array([P[i, j], P[j, k], P[i, k]])
-                s3 = np.linalg.norm(v - np.roll(v, 1, axis=0), axis=1)
-                if s3.min() > 1e-3:
-                    sides.append(s3)
-    sides = np.array(sides)
+                if np.linalg.norm(v - np.roll(v, 1, axis=0), axis=1).min() > 1e-3:
+                    tris.append(v)
+    return np.array(tris).reshape(-1, 3, 3)
+
+
+def model_triangle_sides(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Shortest and longest side of the model's triangles."""
+    t = model_triangles(a, b)
+    sides = np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2)
     return float(sides.min()), float(sides.max())
 
 
@@ -124,16 +129,22 @@ def _crossings(seg: np.ndarray, extend: float, min_angle_deg: float, rows=slice(
 
 def photo_triangles(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.ndarray, extend: float = 1.5,
                     min_angle_deg: float = 15.0, max_triangles: int = 200_000) -> np.ndarray:
-    """Centres (T, 2) of the photo's triangles: segments extended ``extend`` times about their
+    """Centres (T, 2) of the photo's triangles (``photo_triangle_vertices``)."""
+    return photo_triangle_vertices(seg, min_side_px, max_side_px, extend, min_angle_deg, max_triangles).mean(axis=1)
+
+
+def photo_triangle_vertices(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.ndarray, extend: float = 1.5,
+                            min_angle_deg: float = 15.0, max_triangles: int = 200_000) -> np.ndarray:
+    """Vertices (T, 3, 2) of the photo's triangles: segments extended ``extend`` times about their
     middle, pairwise intersections at ≥ ``min_angle_deg``, three segments meeting pairwise; each
     triangle's sides within [min_side_px, max_side_px] of its first segment (the metric limits
     turned into pixels at the segment's depth) and no angle under ``min_angle_deg``."""
     if len(seg) < 3:
-        return np.empty((0, 2))
+        return np.empty((0, 3, 2))
     n = len(seg)
     adj, X = _crossings(seg, extend, min_angle_deg)
     np.fill_diagonal(adj, False)
-    centres = []
+    tris = []
     count = 0
     for i in range(n):
         nj = np.nonzero(adj[i, i + 1:])[0] + i + 1
@@ -149,13 +160,13 @@ def photo_triangles(seg: np.ndarray, min_side_px: np.ndarray, max_side_px: np.nd
             ok = (np.minimum(np.minimum(ab, bc), ca) >= lo) & (np.maximum(np.maximum(ab, bc), ca) <= hi)
             if not ok.any():
                 continue
-            centres.append((A + B[ok] + Cs[ok]) / 3.0)
+            tris.append(np.stack([np.broadcast_to(A, B[ok].shape), B[ok], Cs[ok]], axis=1))
             count += int(ok.sum())
             if count > max_triangles:
                 break
         if count > max_triangles:
             break
-    return np.vstack(centres) if centres else np.empty((0, 2))
+    return np.vstack(tris) if tris else np.empty((0, 3, 2))
 
 
 def cluster_points(xy: np.ndarray, radius_m: float, weights=None):
@@ -360,7 +371,7 @@ def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, perio
 
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
               radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
-              progress=None) -> PoseResult | None:
+              hypotheses: str = "grid", progress=None) -> PoseResult | None:
     """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m:
     a coarse exhaustive search (x, y, heading on the terrain, upright; 32 px cells), a finer one
     around the best candidates (8 px), then the method's MatchSeparate on 4 px cells: in each
@@ -369,30 +380,47 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     period = min(symmetry_deg, 360.0)
     step = (lambda *_: None) if progress is None else progress
-    # A: coarse, everything the rough position allows
     c0 = np.array([rough_xy[0], rough_xy[1], float(ground(np.array([rough_xy[0]]), np.array([rough_xy[1]]))[0])])
     views = [v for v in views if seen_by([v], c0[:2], ground, height_m)]  # the photos it is in
-    vA, rA = _rois(views, c0, radius_m + extent, height_m, 32, mode)
-    if len(vA) < 2:
-        return None
-    poses = grid([c0[0], c0[1], 0.0, period / 2, 0, 0], [radius_m, radius_m, 0, period / 2, 0, 0], [1.5, 1.5, 1, 5.0, 1, 1])
-    poses = poses[poses[:, 3] < period - 1e-9]
-    poses[:, 2] = ground(poses[:, 0], poses[:, 1])
-    sA = score_poses(vA, rA, poses, a, b, kernel).sum(axis=0)
-    step("coarse")
-    seeds = _best_distinct(poses, sA, 3, period=period)
-    # B: 8 px cells around the best few
     vB, rB = _rois(views, c0, radius_m + extent + 2.0, height_m, 8, mode)
-    best, best_s = None, -1.0
-    for s in seeds:
-        cand = grid(s, [1.5, 1.5, 0.5, 4.0, 0, 0], [0.5, 0.5, 0.5, 2.0, 1, 1])
-        sc = score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)
-        i = int(np.argmax(sc))
-        if sc[i] > best_s:
-            best, best_s = cand[i].copy(), float(sc[i])
-    cand = grid(best, [0.25, 0.25, 0.25, 1.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
-    best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
-    step("fine")
+    if len(vB) < 2:
+        return None
+    start = None
+    if hypotheses == "triangles":  # the method's MatchByTriangles; the exhaustive search where it finds nothing
+        start = match_by_triangles(vB, rB, c0, ground, a, b, height_m, period, radius_m, kernel, min_score)
+        step("triangles")
+    if start is not None:
+        best = start[0]
+        # P3P on a symmetric lattice cannot tell the quarter turns apart: the method's four-fold choice
+        turns = np.unique(np.round((best[3] + 90.0 * np.arange(4)) % period, 6))
+        cand = np.repeat(best[None], len(turns), axis=0)
+        cand[:, 3] = turns
+        best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
+        cand = grid(best, [0.5, 0.5, 0.25, 2.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
+        best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
+        per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
+        if np.mean(per / [max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)]) < min_score:
+            start = None  # the method: the exhaustive search where the triangles give no pose scoring over tau
+    if start is None:
+        # A: coarse, everything the rough position allows
+        vA, rA = _rois(views, c0, radius_m + extent, height_m, 32, mode)
+        poses = grid([c0[0], c0[1], 0.0, period / 2, 0, 0], [radius_m, radius_m, 0, period / 2, 0, 0], [1.5, 1.5, 1, 5.0, 1, 1])
+        poses = poses[poses[:, 3] < period - 1e-9]
+        poses[:, 2] = ground(poses[:, 0], poses[:, 1])
+        sA = score_poses(vA, rA, poses, a, b, kernel).sum(axis=0)
+        step("coarse")
+        seeds = _best_distinct(poses, sA, 3, period=period)
+        # B: 8 px cells around the best few
+        best, best_s = None, -1.0
+        for s in seeds:
+            cand = grid(s, [1.5, 1.5, 0.5, 4.0, 0, 0], [0.5, 0.5, 0.5, 2.0, 1, 1])
+            sc = score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)
+            i = int(np.argmax(sc))
+            if sc[i] > best_s:
+                best, best_s = cand[i].copy(), float(sc[i])
+        cand = grid(best, [0.25, 0.25, 0.25, 1.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
+        best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
+        step("fine")
     per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
     norm = np.array([max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)])
     if float(np.mean(per / norm)) < min_score:  # no pylon of this type here: skip the fine stages
@@ -442,6 +470,147 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     pose = core.canonical_pose(pose, period)
     step("refine")
     return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share)
+
+
+# ----------------------------------------------------------------------------------------------
+# MatchByTriangles: P3P hypotheses from photo triangles matched to the model's
+# ----------------------------------------------------------------------------------------------
+
+_ORDERS = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1], [0, 2, 1], [2, 1, 0], [1, 0, 2]])
+
+
+def triangle_hypotheses(view: View, photo_tris: np.ndarray, model_tris: np.ndarray, centre: np.ndarray,
+                        heading_step_deg: float = 2.5, shape_tol_px: float = 3.0, shape_tol_rel: float = 0.05,
+                        min_area_px2: float = 200.0, max_tilt_deg: float = 1.0, max_dist_m: float = 15.0,
+                        max_solves: int = 20_000, level: bool = True) -> np.ndarray:
+    """The method's MatchByTriangles in one photo: poses (N, 6) from P3P (``cv2.solveP3P``, up to
+    4 solutions) on photo triangle x model triangle x vertex order, without the hypotheses tilted
+    more than ``max_tilt_deg`` or further than ``max_dist_m`` from ``centre`` (the rough position
+    on the terrain). All pairs would be ~10⁵ solves per photo; a pair is solved only when the photo
+    triangle's shape (vertices about their centroid) is within ``shape_tol_px`` +
+    ``shape_tol_rel`` x its size of the model triangle's upright projection at ``centre`` for some
+    heading on a ``heading_step_deg`` grid (the method's size filter, made exact for the view)."""
+    import cv2
+    from scipy.spatial import cKDTree
+
+    if not len(photo_tris) or not len(model_tris):
+        return np.empty((0, 6))
+    headings = np.arange(0.0, 360.0, heading_step_deg)
+    pred = []
+    for h in headings:
+        uv, _ = view.project(model_tris.reshape(-1, 3) @ core.rotation(h, 0.0, 0.0).T + centre)
+        pred.append(uv.reshape(-1, 3, 2))
+    pred = np.stack(pred)  # (H, T, 3, 2)
+    e1, e2 = pred[..., 1, :] - pred[..., 0, :], pred[..., 2, :] - pred[..., 0, :]
+    area = 0.5 * np.abs(e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0])
+    hi, ti = np.nonzero(area >= min_area_px2)  # edge-on triangles leave P3P ill-conditioned
+    if not len(hi):
+        return np.empty((0, 6))
+    shapes = pred[hi, ti] - pred[hi, ti].mean(axis=1, keepdims=True)
+    tree = cKDTree(shapes.reshape(len(hi), 6))
+    q = photo_tris[:, _ORDERS].reshape(-1, 3, 2)  # each triangle in its 6 vertex orders
+    qc = (q - q.mean(axis=1, keepdims=True)).reshape(-1, 6)
+    size = np.abs(qc).max(axis=1)
+    hits = tree.query_ball_point(qc, shape_tol_px + shape_tol_rel * size, p=np.inf)
+    pairs = {(i, int(ti[j])) for i, js in enumerate(hits) for j in js}
+    pairs = sorted(pairs)[:max_solves]
+    rv, tv, tri = [], [], []
+    for i, t in pairs:
+        n, rvecs, tvecs = cv2.solveP3P(np.ascontiguousarray(model_tris[t], dtype=np.float64), np.ascontiguousarray(q[i]),
+                                        view.K, None, flags=cv2.SOLVEPNP_P3P)
+        rv += [r.ravel() for r in rvecs[:n]]
+        tv += [x.ravel() for x in tvecs[:n]]
+        tri += [t] * n
+    if not rv:
+        return np.empty((0, 6))
+    rv, tv, tri = np.array(rv), np.array(tv), np.array(tri)
+    Rm = view.R.T @ _rodrigues(rv)  # X_cam = Rc·(Rm·X + T) + tc
+    T = (tv - view.t) @ view.R
+    keep = (np.degrees(np.arccos(np.clip(Rm[:, 2, 2], -1, 1))) <= max_tilt_deg) & (np.linalg.norm(T - centre, axis=1) <= max_dist_m)
+    Rm, T, tri = Rm[keep], T[keep], tri[keep]
+    heading = np.degrees(np.arctan2(Rm[:, 1, 0], Rm[:, 0, 0])) % 360.0
+    if level:  # upright about the matched triangle, which the photo holds in place
+        c = model_tris[tri].mean(axis=1)
+        ch, sh = np.cos(np.radians(heading)), np.sin(np.radians(heading))
+        upright = np.zeros((len(heading), 3, 3))
+        upright[:, 0, 0], upright[:, 0, 1], upright[:, 1, 0], upright[:, 1, 1], upright[:, 2, 2] = ch, -sh, sh, ch, 1.0
+        T = T + np.einsum("nij,nj->ni", Rm - upright, c)
+        return np.column_stack([T, heading, np.zeros(len(T)), np.zeros(len(T))])
+    return np.array([[*x, *core.euler_from_rotation(R)] for x, R in zip(T, Rm)]).reshape(-1, 6)
+
+
+def _rodrigues(rv: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of rotation vectors (N, 3), as cv2.Rodrigues."""
+    theta = np.linalg.norm(rv, axis=1)
+    k = rv / np.where(theta > 0, theta, 1.0)[:, None]
+    Kx = np.zeros((len(rv), 3, 3))
+    Kx[:, 0, 1], Kx[:, 0, 2], Kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    Kx -= Kx.transpose(0, 2, 1)
+    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
+    return np.eye(3) + s * Kx + (1 - c) * Kx @ Kx
+
+
+_MODEL_TRIANGLES: dict = {}
+
+
+def _model_triangles_cached(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    key = (a.tobytes(), b.tobytes())
+    if key not in _MODEL_TRIANGLES:
+        _MODEL_TRIANGLES[key] = model_triangles(a, b)
+    return _MODEL_TRIANGLES[key]
+
+
+def match_by_triangles(views, rois, centre: np.ndarray, ground, a: np.ndarray, b: np.ndarray, height_m: float,
+                       period_deg: float, radius_m: float, kernel=None, min_score: float = 0.0, extend: float = 4.0,
+                       large_share: float = 0.5, max_above_ground_m: float = 1.5, **kw):
+    """The method's MatchByTriangles across photos: in each photo the P3P hypotheses of
+    ``triangle_hypotheses`` (photo triangles inside the ROI of a pylon at ``centre`` ± ``radius_m``,
+    segments extended ``extend`` times; the model's triangles with the longest sides, top
+    ``large_share``, which P3P solves most precisely), those with the base more than
+    ``max_above_ground_m`` off the terrain (``ground``) left out (a slide along the photo's ray
+    keeps a triangle in place), the rest scored by A_s in that photo (``rois``);
+    each photo's best, if its share of matched cells reaches ``min_score``, is merged across photos
+    (MAD-weighted medians; weight: similarity x sin(angle between the photo's ray and the axis);
+    heading modulo ``period_deg``). Returns (pose, MADs of x, y, z, heading, photos that gave
+    one) or None when fewer than two photos did."""
+    extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
+    mt = _model_triangles_cached(a, b)
+    longest = np.linalg.norm(mt - np.roll(mt, 1, axis=1), axis=2).max(axis=1)
+    smin, smax = float(np.linalg.norm(mt - np.roll(mt, 1, axis=1), axis=2).min()), float(longest.max())
+    mt = mt[longest >= np.quantile(longest, 1.0 - large_share)]
+    kw.setdefault("max_dist_m", max(radius_m, 15.0))
+    best, scores, rays = [], [], []
+    for v, r in zip(views, rois):
+        uv, depth = v.project(column_corners(centre, radius_m + extent, height_m))
+        (x0, y0), (x1, y1) = uv.min(axis=0), uv.max(axis=0)
+        seg = v.segments
+        mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+        seg = seg[(mid[:, 0] >= x0) & (mid[:, 0] <= x1) & (mid[:, 1] >= y0) & (mid[:, 1] <= y1)]
+        px_per_m = v.K[0, 0] / float(v.project(centre + [0, 0, height_m / 2])[1][0])
+        tris = photo_triangle_vertices(seg, np.full(len(seg), 0.5 * smin * px_per_m), np.full(len(seg), 2 * smax * px_per_m),
+                                       extend=extend)
+        hyp = triangle_hypotheses(v, tris, mt, centre, **kw)
+        hyp = hyp[np.abs(hyp[:, 2] - ground(hyp[:, 0], hyp[:, 1])) <= max_above_ground_m]
+        if not len(hyp):
+            continue
+        s = score_poses([v], [r], hyp, a, b, kernel)[0]
+        i = int(np.argmax(s))
+        share = s[i] / max(visible_cells(r, v, hyp[i], a, b), 1)
+        if share < min_score:
+            continue
+        best.append(hyp[i])
+        scores.append(s[i])
+        d = hyp[i, :3] + [0, 0, height_m / 2] - v.centre
+        rays.append(d / np.linalg.norm(d))
+    if len(best) < 2:
+        return None
+    best, w, rays = np.array(best), np.array(scores), np.array(rays)
+    pose, mad = np.zeros(6), np.zeros(4)
+    for k in range(3):
+        pose[k], mad[k] = mad_merge(best[:, k], w * np.sqrt(np.clip(1 - rays[:, k] ** 2, 0, 1)))
+    h0 = best[int(np.argmax(w)), 3]
+    pose[3], mad[3] = mad_merge(wrap_deg(best[:, 3] - h0, period_deg) + h0, w)
+    return pose, mad, len(best)
 
 
 # ----------------------------------------------------------------------------------------------
