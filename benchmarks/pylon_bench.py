@@ -79,9 +79,11 @@ def _timed(fn):
     return time.perf_counter() - t, out
 
 
-def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10, perturbed=((2, 0.05, 0.05),)) -> list[dict]:
-    """The whole pylon-pose run on synthetic photo surveys the tests do not use: per pylon the
-    position, height, heading and tilt errors against the truth, false pylons, seconds per photo.
+def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10, perturbed=((2, 0.05, 0.05),),
+                 hypotheses=("grid", "triangles")) -> list[dict]:
+    """The whole pylon-pose run on synthetic photo surveys the tests do not use, once per way of
+    making the first hypotheses (``hypotheses``): per pylon the position, height, heading and tilt
+    errors against the truth, false pylons, seconds per photo.
     ``perturbed``: (seed, metres, degrees) runs whose COLMAP cameras carry an alignment's error, each
     centre moved and each orientation turned by exactly that much in a random direction."""
     import json
@@ -110,40 +112,43 @@ def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10,
                 cams.mkdir()
                 write_colmap_text(cams, cameras, perturb_images(images, shift_m, turn_deg, seed=seed))
                 label = f"seed {seed} cameras off {shift_m} m {turn_deg} deg"
-            t0 = time.perf_counter()
-            rep = run_algorithm("pylon-pose", {"photos": str(d / "photos"), "cameras": str(cams),
-                                               "dem": str(d / "points_dem.tif")}, d / "found.gpkg")
-            secs = time.perf_counter() - t0
-            truth = json.loads((d / "points_truth.json").read_text())["pylons"]
-            got = gpd.read_file(d / "found.gpkg", layer="pylons")
-            matched = 0
-            for p in truth:
-                dist = np.hypot(got.geometry.x - p["x"], got.geometry.y - p["y"]) if len(got) else np.array([np.inf])
-                i = int(np.argmin(dist))
-                if dist[i] > 2.0:
-                    print(f"  {label} {p['model']}: MISSED", flush=True)
-                    continue
-                matched += 1
-                r, sym = got.iloc[i], p["symmetry_deg"]
-                dh = (r.heading_deg - p["heading_deg"] + sym / 2) % sym - sym / 2
-                # tilt: the angle between the found and the true vertical axes of the model (a symmetric
-                # type found 180 degrees round has pitch and roll of the opposite sign, and the same axis)
-                up = [rotation(h_, p_, r_)[:, 2] for h_, p_, r_ in ((r.heading_deg, r.pitch_deg, r.roll_deg),
-                                                                     (p["heading_deg"], p["pitch_deg"], p["roll_deg"]))]
-                tilt = float(np.degrees(np.arccos(np.clip(up[0] @ up[1], -1.0, 1.0))))
-                row = {"case": "pylon-pose search", "seed": seed, "cameras_off_m": shift_m, "cameras_off_deg": turn_deg,
-                       "model": p["model"], "found_as": r.model,
-                       "xy_m": float(dist[i]), "z_m": float(r.geometry.z - p["z"]), "heading_deg": float(dh),
-                       "tilt_deg": tilt, "score": float(r.score), "rms_px": float(r.rms_px)}
-                rows.append(row)
-                print(f"  {label} {p['model']:5s} (as {r.model}): xy {row['xy_m']:.3f} m, z {row['z_m']:+.3f} m, "
-                      f"heading {dh:+.3f} deg, tilt {tilt:.3f} deg, score {r.score:.3f}, rms {r.rms_px:.2f} px", flush=True)
-            n_photos = rep["stats"]["n_photos"]
-            print(f"  {label}: {matched} of {len(truth)} pylons found, {len(got) - matched} false, "
-                  f"{rep['stats'].get('n_candidates')} candidates; {secs:.1f} s for {n_photos} photos = "
-                  f"{secs / n_photos:.2f} s per photo", flush=True)
-            rows.append({"case": "pylon-pose run", "seed": seed, "cameras_off_m": shift_m, "found": matched, "truth": len(truth),
-                         "false": len(got) - matched, "s_per_photo": secs / n_photos})
+            for how in hypotheses:
+                t0 = time.perf_counter()
+                rep = run_algorithm("pylon-pose", {"photos": str(d / "photos"), "cameras": str(cams),
+                                                   "dem": str(d / "points_dem.tif")}, d / f"found_{how}.gpkg",
+                                    {"hypotheses": how})
+                secs = time.perf_counter() - t0
+                truth = json.loads((d / "points_truth.json").read_text())["pylons"]
+                got = gpd.read_file(d / f"found_{how}.gpkg", layer="pylons")
+                matched = 0
+                for p in truth:
+                    dist = np.hypot(got.geometry.x - p["x"], got.geometry.y - p["y"]) if len(got) else np.array([np.inf])
+                    i = int(np.argmin(dist))
+                    if dist[i] > 2.0:
+                        print(f"  {label} {how} {p['model']}: MISSED", flush=True)
+                        continue
+                    matched += 1
+                    r, sym = got.iloc[i], p["symmetry_deg"]
+                    dh = (r.heading_deg - p["heading_deg"] + sym / 2) % sym - sym / 2
+                    # tilt: the angle between the found and the true vertical axes of the model (a symmetric
+                    # type found 180 degrees round has pitch and roll of the opposite sign, and the same axis)
+                    up = [rotation(h_, p_, r_)[:, 2] for h_, p_, r_ in ((r.heading_deg, r.pitch_deg, r.roll_deg),
+                                                                         (p["heading_deg"], p["pitch_deg"], p["roll_deg"]))]
+                    tilt = float(np.degrees(np.arccos(np.clip(up[0] @ up[1], -1.0, 1.0))))
+                    row = {"case": "pylon-pose search", "seed": seed, "cameras_off_m": shift_m, "cameras_off_deg": turn_deg,
+                           "hypotheses": how, "model": p["model"], "found_as": r.model,
+                           "xy_m": float(dist[i]), "z_m": float(r.geometry.z - p["z"]), "heading_deg": float(dh),
+                           "tilt_deg": tilt, "score": float(r.score), "rms_px": float(r.rms_px)}
+                    rows.append(row)
+                    print(f"  {label} {how} {p['model']:5s} (as {r.model}): xy {row['xy_m']:.3f} m, z {row['z_m']:+.3f} m, "
+                          f"heading {dh:+.3f} deg, tilt {tilt:.3f} deg, score {r.score:.3f}, rms {r.rms_px:.2f} px", flush=True)
+                n_photos = rep["stats"]["n_photos"]
+                print(f"  {label} {how}: {matched} of {len(truth)} pylons found, {len(got) - matched} false, "
+                      f"{rep['stats'].get('n_candidates')} candidates; {secs:.1f} s for {n_photos} photos = "
+                      f"{secs / n_photos:.2f} s per photo", flush=True)
+                rows.append({"case": "pylon-pose run", "seed": seed, "cameras_off_m": shift_m, "hypotheses": how,
+                             "found": matched, "truth": len(truth), "false": len(got) - matched,
+                             "s_per_photo": secs / n_photos})
     return rows
 
 

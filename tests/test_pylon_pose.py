@@ -175,16 +175,19 @@ def test_survey_has_what_a_photogrammetry_user_has(survey):
         assert 0 < uv[0] < 2400 and 0 < uv[1] < 1600
 
 
-def test_pylon_pose_finds_both_types_from_a_metashape_xml(survey):
+@pytest.mark.parametrize("hypotheses", ["grid", "triangles"])
+def test_pylon_pose_finds_both_types_from_a_metashape_xml(survey, hypotheses):
     import json
 
     import geopandas as gpd
 
     from toolbox.runner import run_algorithm
 
-    out = survey / "found.gpkg"
+    out = survey / f"found_{hypotheses}.gpkg"
     rep = run_algorithm("pylon-pose", {"photos": str(survey / "photos"), "cameras": str(survey / "cameras.xml"),
-                                       "dem": str(survey / "points_dem.tif")}, out)
+                                       "dem": str(survey / "points_dem.tif")}, out, {"hypotheses": hypotheses})
+    # the triangles' P3P hypotheses start the search (the grid only where fewer than two photos give one)
+    assert rep["stats"]["started_from"][hypotheses] >= 1
     truth = json.loads((survey / "points_truth.json").read_text())["pylons"]
     got = gpd.read_file(out, layer="pylons")
     assert len(got) == len(truth) == rep["stats"]["n_pylons"]  # every pylon, no false one
@@ -202,7 +205,7 @@ def test_pylon_pose_finds_both_types_from_a_metashape_xml(survey):
         up = core.rotation(r.heading_deg, r.pitch_deg, r.roll_deg)[:, 2] @ core.rotation(
             p["heading_deg"], p["pitch_deg"], p["roll_deg"])[:, 2]
         assert np.degrees(np.arccos(min(up, 1.0))) < 0.1
-        assert r.rms_px < 1.0 and 0 < r.edge_share <= 1
+        assert r.rms_px < 1.0 and 0 < r.edge_share <= 1 and r.photo_share >= 0.5
     import sqlite3
 
     con = sqlite3.connect(out)
@@ -392,3 +395,13 @@ def test_triangle_hypotheses_recover_the_pose_by_p3p_and_drop_tilted_ones():
     tilted = search.triangle_hypotheses(view, photo(leaning), tris, rough, level=False)
     near = np.linalg.norm(tilted[:, :3] - truth[:3], axis=1) < 0.5 if len(tilted) else np.zeros(0, bool)
     assert not near.any()
+
+
+def test_photo_share_counts_the_photos_a_pose_matches_in():
+    """The false pylons of the held-out seeds matched in one photo of the 4-5 that saw them."""
+    from toolbox_plugins.pylon_pose import search
+
+    clutter = search.PoseResult(np.zeros(6), 0.063, np.zeros(4), 4, np.array([0.232, 0.003, 0.005, 0.012]))
+    pylon = search.PoseResult(np.zeros(6), 0.053, np.zeros(4), 4, np.array([0.026, 0.124, 0.042, 0.019]))
+    assert clutter.score > pylon.score
+    assert clutter.photo_share(0.021) == 0.25 and pylon.photo_share(0.021) == 0.75

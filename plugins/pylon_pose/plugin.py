@@ -132,7 +132,7 @@ def _run(inputs, params, ctx):
         stats.update(model_triangle_side_m=[round(smin, 3), round(smax, 3)],
                      detector=params["detector"], min_per_photo=per_photo,
                      n_features=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
-    found, cand_scores = [], []
+    found, cand_scores, inconsistent = [], [], []
     for xy in ctx.progress(list(rough), desc="pose search", unit="pylon"):
         # a candidate this close to a pylon already found would converge onto it
         if any(np.hypot(*(r.pose[:2] - xy[:2])) <= params["radius_m"] for _, r in found):
@@ -145,22 +145,29 @@ def _run(inputs, params, ctx):
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
         cand_scores.append(best[1].score if best is not None else 0.0)
-        if best is not None and best[1].score >= params["min_score"] and np.isfinite(best[1].mad).all():
-            found.append(best)
+        if best is None or best[1].score < params["min_score"] or not np.isfinite(best[1].mad).all():
+            continue
+        # a pylon shows in every photo that sees it; clutter lines up with the model in one or two
+        if best[1].photo_share(params["min_score"] / 2) < params["min_photo_share"]:
+            inconsistent.append(round(best[1].score, 3))
+            continue
+        found.append(best)
     kept = []  # two searches that ended on one pylon: the better-scoring one stays
     for name, r in sorted(found, key=lambda f: -f[1].score):
         if all(np.hypot(*(r.pose[:2] - q.pose[:2])) > params["radius_m"] for _, q in kept):
             kept.append((name, r))
     found = kept
     stats["candidate_scores"] = [None if c is None else round(c, 3) for c in cand_scores]
+    stats["rejected_in_few_photos"] = inconsistent
     stats["n_pylons"] = len(found)
+    stats["started_from"] = {k: sum(r.start == k for _, r in found) for k in ("grid", "triangles")}
     stats["scores"] = [round(r.score, 3) for _, r in found]
-    layers = _layers(found, models, origin, dem.crs)
+    layers = _layers(found, models, origin, dem.crs, params["min_score"])
     overlays = _overlays(found, models, views, cameras, images, inputs["photos"]) if ctx.wants("overlays") else None
     return toolbox.Result(outputs={"pylons": layers, "overlays": overlays}, stats=stats)
 
 
-def _layers(found, models, origin, crs):
+def _layers(found, models, origin, crs, min_score):
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point, Polygon
@@ -174,7 +181,8 @@ def _layers(found, models, origin, crs):
         rows.append({"heading_deg": round(float(h), 3), "roll_deg": round(float(ro), 3), "pitch_deg": round(float(p), 3),
                      "score": round(r.score, 4), "mad_x_m": round(float(r.mad[0]), 3), "mad_y_m": round(float(r.mad[1]), 3),
                      "mad_z_m": round(float(r.mad[2]), 3), "mad_heading_deg": round(float(r.mad[3]), 3),
-                     "n_photos": int(r.n_photos), "rms_px": round(float(r.rms_px), 3),
+                     "n_photos": int(r.n_photos), "photo_share": round(r.photo_share(min_score / 2), 3),
+                     "rms_px": round(float(r.rms_px), 3),
                      "edge_share": round(float(r.edge_share), 3), "model": name})
         pts.append(Point(*X))
         a, b = models[name][0], models[name][1]
@@ -189,7 +197,7 @@ def _layers(found, models, origin, crs):
         else:
             feet.append(None)
     cols = ["heading_deg", "roll_deg", "pitch_deg", "score", "mad_x_m", "mad_y_m", "mad_z_m", "mad_heading_deg", "n_photos",
-            "rms_px", "edge_share", "model"]
+            "photo_share", "rms_px", "edge_share", "model"]
     import pandas as pd
 
     df = pd.DataFrame(rows, columns=cols)
@@ -273,6 +281,9 @@ def toolbox_algorithms():
                       "within radius_m, the method's fallback) or triangles (the method's MatchByTriangles: P3P on photo "
                       "triangles matched to the model's, the grid where fewer than two photos give one)",
                       choices=("grid", "triangles")),
+            Parameter("min_photo_share", float, 0.5, "share of the photos that see a candidate in which it must match "
+                      "at least half of min_score: a pylon shows in every photo that sees it, clutter that lines up "
+                      "with the model in one or two", minimum=0.0, maximum=1.0),
             Parameter("mode", str, "max", "direction smoothing of the photo descriptor: max (the thesis's text) or "
                       "sum (its listing)", choices=("max", "sum")),
         ],
@@ -288,7 +299,8 @@ def toolbox_algorithms():
         ],
         outputs=[
             Output("pylons", "vector", "layers pylons (PointZ at the base: heading_deg, roll_deg, pitch_deg, score, "
-                   "mad_x_m, mad_y_m, mad_z_m, mad_heading_deg, n_photos, rms_px: the matched beam points' distance "
+                   "mad_x_m, mad_y_m, mad_z_m, mad_heading_deg, n_photos, photo_share: the share of them in which it matches "
+                   "at least half of min_score, rms_px: the matched beam points' distance "
                    "to their photo edges, edge_share: their share of the beam points in view, model) and "
                    "pylon_footprints (the model's base at the found pose)"),
             Output("overlays", "folder", "overlays/*.png: each photo with the found pylons drawn (half size), to check "

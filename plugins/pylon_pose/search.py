@@ -348,6 +348,11 @@ class PoseResult:
     n_edge_points: int = 0  # beam points matched to segment edge pairs in the last refinement
     rms_px: float = float("nan")  # their RMS distance to the edge pairs' midlines
     edge_share: float = 0.0  # their share of the model's beam points in view
+    start: str = "grid"  # where the first pose came from: grid or triangles
+
+    def photo_share(self, min_share: float) -> float:
+        """Share of the photos in which the pose matches at least ``min_share`` of its cells."""
+        return float(np.mean(self.per_photo >= min_share)) if len(self.per_photo) else 0.0
 
 
 def _rois(views, centre, radius_m, height_m, cell_px, mode):
@@ -469,7 +474,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     per = per / norm
     pose = core.canonical_pose(pose, period)
     step("refine")
-    return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share)
+    return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share,
+                      "grid" if start is None else "triangles")
 
 
 # ----------------------------------------------------------------------------------------------
