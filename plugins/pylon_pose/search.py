@@ -377,11 +377,14 @@ def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, perio
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
               radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
               hypotheses: str = "grid", progress=None) -> PoseResult | None:
-    """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m:
-    a coarse exhaustive search (x, y, heading on the terrain, upright; 32 px cells), a finer one
-    around the best candidates (8 px), then the method's MatchSeparate on 4 px cells: in each
-    photo the best rotation, then the best translation, on grids within the current MADs, merged
-    across photos by MAD-weighted medians; last a joint search (summed over photos) within them."""
+    """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m.
+    First poses: with ``hypotheses="triangles"`` the method's MatchByTriangles (P3P, merged across
+    photos, the best of four quarter turns); with ``"grid"``, or where the triangles give no pose
+    scoring ``min_score``, a coarse exhaustive search (x, y, heading on the terrain, upright; 32 px
+    cells) and a finer one around the best candidates (8 px). Then the method's MatchSeparate on
+    4 px cells: in each photo the best rotation, then the best translation, on grids within the
+    current MADs, merged across photos by MAD-weighted medians; a joint search (summed over
+    photos) within them; last the continuous refinement on the segments (``refine_on_segments``)."""
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     period = min(symmetry_deg, 360.0)
     step = (lambda *_: None) if progress is None else progress
