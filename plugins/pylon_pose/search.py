@@ -498,7 +498,9 @@ def triangle_hypotheses(view: View, photo_tris: np.ndarray, model_tris: np.ndarr
     on the terrain). All pairs would be ~10⁵ solves per photo; a pair is solved only when the photo
     triangle's shape (vertices about their centroid) is within ``shape_tol_px`` +
     ``shape_tol_rel`` x its size of the model triangle's upright projection at ``centre`` for some
-    heading on a ``heading_step_deg`` grid (the method's size filter, made exact for the view)."""
+    heading on a ``heading_step_deg`` grid (the method's size filter, made exact for the view), at
+    most ``max_solves`` pairs. With ``level`` each hypothesis is turned upright about its matched
+    triangle: P3P on a triangle a hundred pixels across leaves tilts of about a degree."""
     import cv2
     from scipy.spatial import cKDTree
 
