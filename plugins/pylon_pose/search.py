@@ -361,6 +361,12 @@ def _rois(views, centre, radius_m, height_m, cell_px, mode):
     return [views[k] for k in keep], [rois[k] for k in keep]
 
 
+def _shares(views, rois, pose, a, b, kernel=None) -> np.ndarray:
+    """Per photo, the share of the pose's beam cells that match photo segments of their direction."""
+    per = score_poses(views, rois, pose[None], a, b, kernel)[:, 0]
+    return per / np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(views, rois)])
+
+
 def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, period=360.0):
     order = np.argsort(-scores)
     out = []
@@ -406,8 +412,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
         cand = grid(best, [0.5, 0.5, 0.25, 2.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
         best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
-        per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
-        if np.mean(per / [max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)]) < min_score:
+        shares = _shares(vB, rB, best, a, b, kernel)
+        if shares.mean() < min_score:
             start = None  # the method: the exhaustive search where the triangles give no pose scoring over tau
     if start is None:
         # A: coarse, everything the rough position allows
@@ -429,10 +435,9 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         cand = grid(best, [0.25, 0.25, 0.25, 1.0, 0, 0], [0.125, 0.125, 0.25, 0.5, 1, 1])
         best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
         step("fine")
-    per = score_poses(vB, rB, best[None], a, b, kernel)[:, 0]
-    norm = np.array([max(visible_cells(r, v, best, a, b), 1) for v, r in zip(vB, rB)])
-    if float(np.mean(per / norm)) < min_score:  # no pylon of this type here: skip the fine stages
-        return PoseResult(best, float(np.mean(per / norm)), np.full(4, np.nan), len(vB), per / norm)
+        shares = _shares(vB, rB, best, a, b, kernel)
+    if float(shares.mean()) < min_score:  # no pylon of this type here: skip the fine stages
+        return PoseResult(best, float(shares.mean()), np.full(4, np.nan), len(vB), shares)
     # C: MatchSeparate on 4 px cells, per photo, merged
     vC, rC = _rois(views, best[:3], extent + 1.5, height_m, 4, mode)
     mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
@@ -472,9 +477,7 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     refined, n_edge, rms, share = refine_on_segments(vC, pose, a, b)
     if np.all(np.abs(refined[:3] - pose[:3]) <= 0.5) and np.all(np.abs(refined[3:] - pose[3:]) <= 1.0):
         pose = refined
-    per = score_poses(vC, rC, pose[None], a, b, kernel)[:, 0]
-    norm = np.array([max(visible_cells(r, v, pose, a, b), 1) for v, r in zip(vC, rC)])
-    per = per / norm
+    per = _shares(vC, rC, pose, a, b, kernel)
     pose = core.canonical_pose(pose, period)
     step("refine")
     return PoseResult(pose, float(per.mean()), np.array([mad[0], mad[1], mad[2], mad[3]]), len(vC), per, n_edge, rms, share,
@@ -586,8 +589,9 @@ def match_by_triangles(views, rois, centre: np.ndarray, ground, a: np.ndarray, b
     one) or None when fewer than two photos did."""
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     mt = _model_triangles_cached(a, b)
-    longest = np.linalg.norm(mt - np.roll(mt, 1, axis=1), axis=2).max(axis=1)
-    smin, smax = float(np.linalg.norm(mt - np.roll(mt, 1, axis=1), axis=2).min()), float(longest.max())
+    sides = np.linalg.norm(mt - np.roll(mt, 1, axis=1), axis=2)
+    longest = sides.max(axis=1)
+    smin, smax = float(sides.min()), float(longest.max())
     mt = mt[longest >= np.quantile(longest, 1.0 - large_share)]
     kw.setdefault("max_dist_m", max(radius_m, 15.0))
     best, scores, rays = [], [], []
