@@ -178,14 +178,14 @@ def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_d
     if len(kept) < len(planes):
         planes = _assign(p, kept, max_distance, link)
     planes = _merge(p, planes, max_distance, link)
+    ambiguous = _ambiguous(p, planes, max_distance, link)
     out = []
-    for n, d, idx in planes:
+    for (n, d, idx), amb in zip(planes, ambiguous):
         n, d, rms = fit_plane(p[idx])
-        # the normal from the points within 2.5 rms (a few points of a neighbouring face at the
-        # intersection tilt a small face's fit)
-        keep = np.abs(p[idx] @ n - d) <= 2.5 * rms
-        if normals_pt is not None:  # and whose own local plane agrees (not blended across an edge)
-            keep &= np.abs(normals_pt[idx] @ n) >= cos_tol
+        # the normal from the points within 2.5 rms that are not as near a neighbouring face (a
+        # few points across the intersection tilt a small face's fit; a selection by local
+        # normals instead kept a dormer face's middle strip and tilted it as much)
+        keep = (np.abs(p[idx] @ n - d) <= 2.5 * rms) & ~amb
         core_pts = idx[keep]
         if len(core_pts) >= max(3, 0.6 * len(idx)):
             n, d, _ = fit_plane(p[core_pts])
@@ -212,6 +212,29 @@ def _assign(p, found, max_distance, link):
         idx = np.flatnonzero(best == j)
         if len(idx) >= 3:
             out.append((n, d, idx))
+    return out
+
+
+def _ambiguous(p, planes, max_distance, link) -> list[np.ndarray]:
+    """Per plane, which of its points lie within ``max_distance`` of another plane whose points
+    they touch in plan (within ``link``): the strip along an intersection that either face could
+    hold."""
+    lo = [p[idx, :2].min(axis=0) - link for _, _, idx in planes]
+    hi = [p[idx, :2].max(axis=0) + link for _, _, idx in planes]
+    trees: dict[int, cKDTree] = {}
+    out = []
+    for a, (_, _, idx) in enumerate(planes):
+        amb = np.zeros(len(idx), bool)
+        for b, (n2, d2, idx2) in enumerate(planes):
+            if b == a or np.any(lo[b] > hi[a]) or np.any(lo[a] > hi[b]):
+                continue
+            close = np.abs(p[idx] @ n2 - d2) <= max_distance
+            if close.any():
+                if b not in trees:
+                    trees[b] = cKDTree(p[idx2, :2])
+                close[close] = trees[b].query(p[idx[close], :2], distance_upper_bound=link)[0] <= link
+                amb |= close
+        out.append(amb)
     return out
 
 
@@ -250,6 +273,113 @@ def _merge(p, planes, max_distance, link, max_angle_deg: float = 3.0):
             if merged:
                 break
     return planes
+
+
+def _slope_aspect_sigma(xyz: np.ndarray, normal: np.ndarray, groups: int = 20):
+    """(slope, aspect, σ slope, σ aspect), radians, of a plane with ``normal`` through ``xyz``; the
+    σ by a delete-a-group jackknife of the least-squares fit (points i, i + groups, ... left out in
+    turn), which also counts what a textbook σ misses on a small face: a few points at its edge
+    that lever it."""
+    n = len(xyz)
+    slope = float(np.arccos(np.clip(normal[2], -1.0, 1.0)))
+    # aspect as plane_attributes: clockwise from north, the way the face looks down
+    aspect = float(np.arctan2(normal[0], normal[1]))
+    g = int(min(groups, n))
+    q = xyz - xyz.mean(axis=0)
+    lab = np.arange(n) % g
+    cnt = np.bincount(lab, minlength=g).astype(float)
+    sums = np.stack([np.bincount(lab, q[:, i], minlength=g) for i in range(3)], axis=1)
+    outer = np.einsum("ni,nj->nij", q, q)
+    raw = np.stack([np.stack([np.bincount(lab, outer[:, i, j], minlength=g) for j in range(3)], axis=1)
+                    for i in range(3)], axis=1)
+    keep_n = n - cnt
+    keep_sum = sums.sum(axis=0) - sums
+    mean = keep_sum / keep_n[:, None]
+    scatter = (raw.sum(axis=0) - raw) - keep_n[:, None, None] * np.einsum("gi,gj->gij", mean, mean)
+    reps = np.linalg.eigh(scatter)[1][:, :, 0]
+    reps *= np.where(reps @ normal < 0, -1.0, 1.0)[:, None]
+    u = np.array([np.sin(aspect), np.cos(aspect)])
+    along = reps[:, :2] @ u / max(np.cos(slope), 0.05)
+    across = (reps[:, :2] @ np.array([u[1], -u[0]])) / max(np.sin(slope), 1e-9)
+    f = (g - 1) / g
+    sig_s = float(np.sqrt(f * np.sum((along - along.mean()) ** 2)))
+    sig_a = float(np.sqrt(f * np.sum((across - across.mean()) ** 2)))
+    return slope, aspect, sig_s, sig_a
+
+
+def _normal_from(slope: float, aspect: float) -> np.ndarray:
+    return np.array([np.sin(slope) * np.sin(aspect), np.sin(slope) * np.cos(aspect), np.cos(slope)])
+
+
+def regularise_planes(xyz: np.ndarray, planes: list[Plane], k_sigma: float = 3.0) -> tuple[list[Plane], dict]:
+    """One building's faces made regular where their own points cannot tell otherwise (as CGAL's
+    ``regularize_planes`` and Verdie et al. 2015 do with a fixed angle; here the tolerance is each
+    face's own uncertainty, ``k_sigma`` standard errors, so a big face only moves by what its
+    points allow and a small one, a dormer's, borrows the precision of the rest):
+
+    - a face whose slope is within the tolerance of 0 is levelled;
+    - aspects that agree modulo 90° with the building's best-known face's become exactly one of
+      the building's four axis directions (their weighted mean);
+    - slopes that agree within their joint tolerance share their weighted mean (a gable's two
+      faces, a hip's four, a dormer's pair).
+
+    Each changed face keeps its points; its offset and rms are refitted with the new normal.
+    Returns (planes, counts of levelled faces, snapped aspects, faces in shared-slope groups)."""
+    counts = {"levelled": 0, "aspects_snapped": 0, "slopes_shared": 0}
+    if not planes or k_sigma <= 0:
+        return planes, counts
+    est = [_slope_aspect_sigma(xyz[pl.indices], pl.normal) for pl in planes]
+    slope = np.array([e[0] for e in est])
+    aspect = np.array([e[1] for e in est])
+    sig_s = np.array([e[2] for e in est])
+    sig_a = np.array([e[3] for e in est])
+    flat = slope <= k_sigma * sig_s
+    counts["levelled"] = int(flat.sum())
+    new_slope = np.where(flat, 0.0, slope)
+    new_aspect = aspect.copy()
+    tilted = np.flatnonzero(~flat)
+    if len(tilted):
+        # the building's axes: around the face whose aspect is best known, every face that agrees
+        # with it modulo 90°, weighted by its precision
+        ref = tilted[np.argmin(sig_a[tilted])]
+
+        def off90(a, b):
+            return (a - b + np.pi / 4) % (np.pi / 2) - np.pi / 4
+
+        agree = tilted[np.abs(off90(aspect[tilted], aspect[ref])) <= k_sigma * np.hypot(sig_a[tilted], sig_a[ref])]
+        w = 1.0 / sig_a[agree] ** 2
+        axis = aspect[ref] + float(np.sum(w * off90(aspect[agree], aspect[ref])) / w.sum())
+        sig_axis = float(1.0 / np.sqrt(w.sum()))
+        snap = tilted[np.abs(off90(aspect[tilted], axis)) <= k_sigma * np.hypot(sig_a[tilted], sig_axis)]
+        new_aspect[snap] = aspect[snap] - off90(aspect[snap], axis)
+        counts["aspects_snapped"] = int(len(snap))
+        # slopes: greedy groups from the best-known face down, each joining the first group whose
+        # weighted mean it agrees with
+        groups: list[list[int]] = []
+        for i in tilted[np.argsort(sig_s[tilted])]:
+            for grp in groups:
+                w = 1.0 / sig_s[grp] ** 2
+                mean = float(np.sum(w * slope[grp]) / w.sum())
+                if abs(slope[i] - mean) <= k_sigma * np.hypot(sig_s[i], 1.0 / np.sqrt(w.sum())):
+                    grp.append(i)
+                    break
+            else:
+                groups.append([i])
+        for grp in groups:
+            if len(grp) > 1:
+                w = 1.0 / sig_s[grp] ** 2
+                new_slope[grp] = float(np.sum(w * slope[grp]) / w.sum())
+                counts["slopes_shared"] += len(grp)
+    out = []
+    for i, pl in enumerate(planes):
+        if new_slope[i] == slope[i] and new_aspect[i] == aspect[i]:
+            out.append(pl)
+            continue
+        n = _normal_from(new_slope[i], new_aspect[i])
+        dist = xyz[pl.indices] @ n
+        d = float(np.mean(dist))
+        out.append(Plane(n, d, pl.indices, float(np.sqrt(np.mean((dist - d) ** 2)))))
+    return out, counts
 
 
 def plane_attributes(normal: np.ndarray) -> tuple[float, float]:

@@ -98,9 +98,13 @@ def _run(inputs, params, ctx):
     rows, geoms = [], []
     line_rows, line_geoms = [], []
     next_id = 1
+    reg_counts: dict = {}
     for b, g in ctx.progress(groups, desc="roof-planes", unit="building"):
         planes = core.detect_planes(xyz[g], angle, rho, params["max_distance_m"] / hu, min_points, link, voter,
                                     normal_tol_deg=params["normal_tol_deg"] or None, min_width=link)
+        planes, reg = core.regularise_planes(xyz[g], planes, params["regularise_sigma"])
+        for k, v in reg.items():
+            reg_counts[k] = reg_counts.get(k, 0) + v
         first_id = next_id
         hulls = []
         for pl in planes:
@@ -148,7 +152,7 @@ def _run(inputs, params, ctx):
     stats = {"source": source, "n_roof_points": int(len(idx)), "n_buildings": len(groups), "n_planes": next_id - 1,
              "points_on_planes": on_plane, "share_on_planes": round(on_plane / max(len(idx), 1), 4),
              "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
-             "link_m_used": round(link * hu, 3), "accumulator_cells": len(reference.ball_cells(angle)),
+             "link_m_used": round(link * hu, 3), "regularised": reg_counts, "accumulator_cells": len(reference.ball_cells(angle)),
              "seconds": round(time.perf_counter() - t0, 3)}
     stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "break", "step")}
     return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},
@@ -309,7 +313,9 @@ def toolbox_algorithms():
             "fullest cell is refitted by least squares, grown to the points within max_distance_m, split into "
             "connected patches (link_m), and each patch of min_points or more is a plane whose votes are taken "
             "back; repeated while a cell holds min_points votes. Points then go to the nearest plane they touch, "
-            "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped. Roof points: the file's class 6 (source=classified), buildings found by "
+            "near-duplicate planes merge; a plane narrower than link_m (a strip along a ridge) is dropped; faces are "
+            "regularised within their own fit's uncertainty (levelled, aspects on the building's axes, equal "
+            "slopes shared; regularise_sigma). Roof points: the file's class 6 (source=classified), buildings found by "
             "classify (detect), or every point of the input (all); auto takes class 6 when the file has it. "
             "Where two adjacent faces meet, their intersection clipped to both is a roof line (ridge, hip, valley, "
             "break); where a face stands over an adjacent lower one without meeting it, the part of its outline "
@@ -331,6 +337,9 @@ def toolbox_algorithms():
             Parameter("link_m", float, None, "points closer than this in plan belong to one patch; coplanar "
                       "patches further apart are separate planes (auto: 4 x the point spacing, at least 1 m; "
                       "reported as link_m_used)", unit="m", minimum=0.01, maximum=100.0, allow_auto=True),
+            Parameter("regularise_sigma", float, 3.0, "faces made regular where their points cannot tell "
+                      "otherwise: levelled, aspects on the building's axes, equal slopes shared, each within this "
+                      "many standard errors of the face's own fit (0: off)", minimum=0.0, maximum=10.0),
             Parameter("hull_ratio", float, 0.3, "concave hull of a face's points (0 most concave, 1 convex)",
                       minimum=0.0, maximum=1.0),
             Parameter("max_accumulator_mb", float, None, "memory an accumulator may take (auto: a quarter of "
