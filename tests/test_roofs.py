@@ -345,7 +345,10 @@ def test_every_roof_type_with_trees_over_eaves(tmp_path):
     assert s["faces"] >= 60 and s["completeness"] == 1.0 and s["correctness"] >= 0.97, s  # 17 buildings
     assert s["right_face_share"] >= 0.98, s
     meta = json.loads((tmp_path / "a_truth.json").read_text())
-    assert {"pyramid", "shed", "mansard", "gambrel", "L", "T", "cross"} <= {b["roof"] for b in meta["buildings"]}
+    assert {"pyramid", "shed", "mansard", "gambrel", "L", "T", "cross", "flat_parapet"} <= {b["roof"] for b in meta["buildings"]}
+    # a parapet's top (building points on no face) is a wall's top, no roof face: none of its points on a plane
+    parapet = roof & (np.asarray(las.plane_id) < 0)
+    assert parapet.sum() >= 50 and (pred[parapet] > 0).mean() < 0.05, (parapet.sum(), (pred[parapet] > 0).sum())
     # the truth: each point of a face lies in that face's polygon, at its plane's height
     xyz = np.column_stack([las.x, las.y, las.z])
     for f in meta["roof_planes"]:

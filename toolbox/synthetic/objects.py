@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-ROOF_TYPES = ("flat", "gable", "hip", "hip_dormer", "pyramid", "shed", "mansard", "gambrel", "L", "T", "cross")
+ROOF_TYPES = ("flat", "flat_parapet", "gable", "hip", "hip_dormer", "pyramid", "shed", "mansard", "gambrel", "L", "T", "cross")
 
 
 # ------------------------------------------------------------------------------------------
@@ -41,6 +41,7 @@ class Building:
     dormer: tuple | None = None  # (a0, width, b_front, ridge_z_rel, pitch_deg)
     upper_pitch_deg: float = 0.0  # mansard and gambrel: the shallow upper faces' pitch ...
     break_inset_m: float = 0.0  # ... above a break this far in from the eaves (plan)
+    parapet: tuple | None = None  # flat_parapet: (height over the roof, thickness), m
 
     def to_ab(self, u, v):
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
@@ -71,6 +72,11 @@ class Building:
         fp = box(-L, -W, L, W)
         if self.roof == "flat":
             self.faces = [RoofFace("flat", z, 0.0, 0.0, fp)]
+            return
+        if self.roof == "flat_parapet":
+            # the roof face inside a low wall round the edge; the wall's top is no roof face
+            th = self.parapet[1]
+            self.faces = [RoofFace("flat", z, 0.0, 0.0, box(-L + th, -W + th, L - th, W - th))]
             return
         if self.roof == "gable":
             faces = [RoofFace("south", z + t * W, 0.0, t, None), RoofFace("north", z + t * W, 0.0, -t, None)]
@@ -121,7 +127,7 @@ class Building:
         self.faces = [f for f in faces if f.polygon_ab is not None and f.polygon_ab.area > 1e-6]
 
     def roof_height(self, u, v):
-        """Roof height and face index for points inside the footprint."""
+        """Roof height and face index for points inside the footprint (-1: a parapet's top)."""
         a, b = self.to_ab(u, v)
         zs = np.stack([f.z0 + f.ga * a + f.gb * b for f in self.faces[: self._n_main()]])
         idx = np.argmin(zs, axis=0)
@@ -133,6 +139,11 @@ class Building:
             inbox = (np.abs(a - a0) <= dw / 2) & (b >= 0) & (b <= b_front) & (zd > z)
             z = np.where(inbox, zd, z)
             idx = np.where(inbox, np.where(a < a0, len(self.faces) - 2, len(self.faces) - 1), idx)
+        if self.roof == "flat_parapet":
+            h, th = self.parapet
+            wall = (np.abs(a) > self.length_m / 2 - th) | (np.abs(b) > self.width_m / 2 - th)
+            z = np.where(wall, z + h, z)
+            idx = np.where(wall, -1, idx)  # on no face
         return z, idx
 
     def _n_main(self) -> int:
@@ -152,7 +163,7 @@ class Building:
             a, bb = np.asarray(f.polygon_ab.exterior.coords).T if f.polygon_ab.geom_type == "Polygon" else \
                 np.concatenate([np.asarray(g.exterior.coords) for g in f.polygon_ab.geoms]).T
             tops.append(float(np.max(f.z0 + f.ga * a + f.gb * bb)))
-        return max(tops)
+        return max(tops) + (self.parapet[0] if self.parapet else 0.0)
 
     def face_plane_world(self, f: RoofFace, origin=(0.0, 0.0)):
         """Unit normal (upwards) and offset d with n . p = d, in local scene coordinates + origin."""

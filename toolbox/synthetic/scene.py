@@ -147,7 +147,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
                     intensity=rng.integers(150, 600, over.sum()))
         h = i_in[roof_hit]
         pts.add(u[h], v[h], zr[roof_hit] + rng.normal(0, noise_m, len(h)), BUILDING, nret[roof_hit], nret[roof_hit],
-                pulse_id[h], obj=b.id, plane=plane_base + face[roof_hit], intensity=rng.integers(900, 1400, len(h)))
+                pulse_id[h], obj=b.id, plane=np.where(face[roof_hit] >= 0, plane_base + face[roof_hit], -1), intensity=rng.integers(900, 1400, len(h)))
         b._plane_base = plane_base
         plane_base += len(b.faces)
         taken |= inside
@@ -263,6 +263,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
             "id": b.id, "roof": b.roof, "footprint": (b.footprint_uv() + origin).tolist(),
             "length_m": b.length_m, "width_m": b.width_m, "heading_deg": float(np.degrees(b.heading_rad)),
             "eave_z": b.base_z + b.eave_m, "pitch_deg": b.pitch_deg,
+            **({"parapet_height_m": b.parapet[0], "parapet_thickness_m": b.parapet[1]} if getattr(b, "parapet", None) else {}),
             "top_z": b.roof_top(),
         })
         for j, f in enumerate(b.faces):
@@ -468,7 +469,8 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
                  ("gable", 30.0, 18.0), ("hip", 11.0, 9.0), ("flat", 5.0, 4.0), ("gable", 9.0, 7.0)]
         if roof_set == "all":
             specs += [("pyramid", 10.0, 10.0), ("shed", 12.0, 8.0), ("mansard", 16.0, 12.0), ("gambrel", 14.0, 10.0),
-                      ("L", 18.0, 9.0), ("T", 20.0, 10.0), ("cross", 18.0, 9.0), ("L", 15.0, 8.0), ("T", 16.0, 9.0)]
+                      ("L", 18.0, 9.0), ("T", 20.0, 10.0), ("cross", 18.0, 9.0), ("L", 15.0, 8.0), ("T", 16.0, 9.0),
+                      ("flat_parapet", 20.0, 14.0), ("flat_parapet", 12.0, 9.0)]
     else:
         specs = [("hip_dormer", 16.0, 11.0), ("flat", 60.0, 40.0), ("gable", 34.0, 20.0), ("hip", 14.0, 10.0),
                  ("gable", 12.0, 9.0), ("hip", 12.0, 9.5), ("gable", 10.0, 8.0), ("flat", 18.0, 12.0),
@@ -518,6 +520,9 @@ def _place_buildings(kind, W, H, rng, terrain, lines, roof_set="basic"):
         elif roof in ("flat", "gable", "hip", "hip_dormer"):
             b.pitch_deg = {"flat": 0.0, "gable": rng.uniform(25, 42) if L < 20 else rng.uniform(12, 20),
                            "hip": rng.uniform(28, 40), "hip_dormer": 35.0}[roof]
+        elif roof == "flat_parapet":
+            b.pitch_deg = 0.0
+            b.parapet = (float(rng.uniform(0.4, 1.0)), float(rng.uniform(0.25, 0.4)))
         elif roof in ("pyramid", "shed"):
             b.pitch_deg = float(rng.uniform(20, 35) if roof == "pyramid" else rng.uniform(8, 18))
         else:  # mansard, gambrel: steep below the break, shallow above
