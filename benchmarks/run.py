@@ -761,9 +761,71 @@ def bench_roofs(tmp: Path, out_dir: Path) -> list[dict]:
             print(f"  Building3D Tallinn, {len(objs)} roofs, {key}: {np.mean(cover[key]):.3f} of the reference edge "
                   f"length within 0.5 m of ours, {np.mean(near[key]):.3f} of ours within 0.5 m of the reference",
                   flush=True)
+    rows.append(_bench_roof_family(tmp))
     rows += _bench_outlines(tmp)
     rows.append(_bench_ball_vote())
     return rows
+
+
+ROOF_FAMILY = [{"seed": s} for s in (4, 5, 6, 7, 8, 9)] + [
+    {"roof_set": "all", "seed": s, "density_ppm2": d, "noise_m": n}
+    for s, d, n in ((3, 10.0, 0.03), (4, 5.0, 0.02), (5, 20.0, 0.04), (6, 8.0, 0.05), (7, 15.0, 0.02), (8, 10.0, 0.05),
+                    (9, 6.0, 0.03), (10, 25.0, 0.05))]
+for _v, (_d, _n) in zip(ROOF_FAMILY[1:6], ((5.0, 0.05), (30.0, 0.02), (8.0, 0.04), (12.0, 0.05), (5.0, 0.03))):
+    _v.update(density_ppm2=_d, noise_m=_n)
+
+
+def _bench_roof_family(tmp: Path) -> dict:
+    """roof-planes alone over more variants of the generator (seeds, 5-30 pts/m², 2-5 cm noise):
+    the worst completeness, correctness and right-face share, and the normal errors of faces of
+    >= 30 points against least squares on each face's own true points."""
+    import geopandas as gpd
+
+    from toolbox_plugins.roofs.core import fit_plane
+    from toolbox_plugins.roofs.evaluation import plane_scores
+
+    comp, corr, right, ours, floor, secs = [], [], [], [], [], 0.0
+    for extra in ROOF_FAMILY:
+        scene = tmp / "family.laz"
+        toolbox.run("synthetic-scene", output=scene, overwrite=True, kind="roofs", **extra)
+        t, _ = timed(lambda: toolbox.run("roof-planes", scene, tmp / "fam.gpkg", overwrite=True))
+        secs += t
+        las = laspy.read(scene)
+        roof = np.asarray(las.classification) == 6
+        pid = np.asarray(las.plane_id)
+        truth = np.where(roof, pid + 1, 0)
+        pred = np.where(roof, np.asarray(laspy.read(tmp / "fam_classified.laz").plane_id), 0)
+        sc = plane_scores(truth, pred)
+        comp.append(sc["completeness"])
+        corr.append(sc["correctness"])
+        right.append(sc["right_face_share"])
+        faces = {f["plane_id"]: f for f in json.loads((tmp / "family_truth.json").read_text())["roof_planes"]}
+        xyz = np.column_stack([las.x, las.y, las.z])
+        for f in faces.values():
+            m = roof & (pid == f["plane_id"])
+            if m.sum() >= 30:
+                floor.append(np.degrees(np.arccos(min(1.0, abs(fit_plane(xyz[m])[0] @ np.array(f["normal"]))))))
+        for r in gpd.read_file(tmp / "fam.gpkg", layer="roof_planes").itertuples():
+            ids, cnt = np.unique(truth[pred == r.plane_id], return_counts=True)
+            if ids[np.argmax(cnt)] == 0 or faces[int(ids[np.argmax(cnt)]) - 1]["n_points"] < 30:
+                continue
+            f = faces[int(ids[np.argmax(cnt)]) - 1]
+            n = np.array([r.normal_x, r.normal_y, r.normal_z])
+            ours.append(np.degrees(np.arccos(min(1.0, abs(n @ np.array(f["normal"]))))))
+    ours, floor = np.array(ours), np.array(floor)
+    row = {"case": "roof-planes synthetic family", "variants": len(ROOF_FAMILY), "ours_s": secs,
+           "completeness_min": min(comp), "correctness_min": min(corr), "right_face_share_min": min(right),
+           "faces_ge_30": len(floor), "normal_err_deg": {"mean": float(ours.mean()), "p95": float(np.percentile(ours, 95)),
+                                                     "max": float(ours.max()), "over_1": int((ours > 1).sum())},
+           "lsq_true_points_err_deg": {"mean": float(floor.mean()), "p95": float(np.percentile(floor, 95)),
+                                       "max": float(floor.max()), "over_1": int((floor > 1).sum())}}
+    print(f"  synthetic family, {len(ROOF_FAMILY)} more variants (seeds 4-9 basic, roof_set=all 3-10; 5-30 pts/m2, "
+          f"2-5 cm noise), ours only, {secs:.1f} s: completeness min {min(comp):.3f}, correctness min {min(corr):.3f}, "
+          f"right face min {min(right):.3f}; normal error on {len(floor)} faces of >= 30 points: mean {ours.mean():.3f}, "
+          f"p95 {np.percentile(ours, 95):.3f}, max {ours.max():.2f} deg, {(ours > 1).sum()} over 1 deg (least squares "
+          f"on each face's true points: {floor.mean():.3f} / {np.percentile(floor, 95):.3f} / {floor.max():.2f}, "
+          f"{(floor > 1).sum()} over 1 deg)", flush=True)
+    return row
 
 
 def _bench_ball_vote() -> dict:

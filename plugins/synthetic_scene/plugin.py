@@ -142,7 +142,8 @@ def toolbox_algorithms():
             Parameter("photos_per_pylon", int, 12, "pylons: photos of each pylon from 100-150 m, a sixth of them "
                       "nadir, the rest oblique (35-70° elevation) all round", minimum=3, maximum=60),
             Parameter("roof_set", str, "basic", "roofs: the buildings (basic: gable, hip, hip with a dormer, flat; all: "
-                      "also pyramid, shed, mansard and gambrel, on a 240 x 170 m scene)", choices=("basic", "all")),
+                      "also pyramid, shed, mansard, gambrel, L, T, cross and flat roofs with a parapet, crowns over "
+                      "some eaves, on a 300 x 220 m scene)", choices=("basic", "all")),
         ],
         inputs=[],
         outputs=[
