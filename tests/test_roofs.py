@@ -182,6 +182,13 @@ def test_regularisation_pools_small_faces_and_leaves_what_the_points_contradict(
     assert np.max(dormer_after) < np.max(dormer_before)
     # switched off: the planes as given
     assert core.regularise_planes(xyz, planes, 0.0)[0] is planes
+    # points exactly on their planes: no scatter to weigh by, still finite normals on the axes
+    exact = [np.asarray(_noisy_face(np.random.default_rng(1), *spec[:5], spec[5], 0.0)[0]) for spec in specs]
+    sizes = np.cumsum([0] + [len(e) for e in exact])
+    pl0 = [core.Plane(*core.fit_plane(e)[:2], np.arange(sizes[i], sizes[i + 1]), 0.0) for i, e in enumerate(exact)]
+    out0, _ = core.regularise_planes(np.vstack(exact), pl0, 3.0)
+    assert all(np.isfinite(p.normal).all() for p in out0)
+    assert abs(((core.plane_attributes(out0[2].normal)[1] - 20) + 45) % 90 - 45) < 1e-6
 
 
 def test_roof_planes_on_real_roofs_with_face_labels(tmp_path):

@@ -352,8 +352,9 @@ def _slope_aspect_sigma(xyz: np.ndarray, normal: np.ndarray, groups: int = 20):
     along = reps[:, :2] @ u / max(np.cos(slope), 0.05)
     across = (reps[:, :2] @ np.array([u[1], -u[0]])) / max(np.sin(slope), 1e-9)
     f = (g - 1) / g
-    sig_s = float(np.sqrt(f * np.sum((along - along.mean()) ** 2)))
-    sig_a = float(np.sqrt(f * np.sum((across - across.mean()) ** 2)))
+    # a floor: points exactly on a plane (no noise) have no scatter, and weights of 1/σ² need one
+    sig_s = max(float(np.sqrt(f * np.sum((along - along.mean()) ** 2))), 1e-9)
+    sig_a = max(float(np.sqrt(f * np.sum((across - across.mean()) ** 2))), 1e-9)
     return slope, aspect, sig_s, sig_a
 
 
