@@ -95,11 +95,11 @@ def _grow(p: np.ndarray, free: np.ndarray, seed: np.ndarray, max_distance: float
         n, d, _ = fit_plane(p[idx])
         near = np.abs(p[free] @ n - d) <= max_distance
         if normals is not None:
-            agree = np.abs(normals @ n) >= cos_tol
-            ok = agree[free]
-            if near_of is not None:  # or a nearest neighbour's does
-                ok |= agree[near_of[free]].any(axis=1)
-            near &= ok
+            if near_of is None:
+                near &= np.abs(normals[free] @ n) >= cos_tol
+            else:  # or a nearest neighbour's does
+                agree = np.abs(normals @ n) >= cos_tol
+                near &= agree[free] | agree[near_of[free]].any(axis=1)
         new = free[near]
         if len(new) == len(idx) and np.array_equal(new, idx):
             break
@@ -338,10 +338,10 @@ def _slope_aspect_sigma(xyz: np.ndarray, normal: np.ndarray, groups: int = 20):
     q = xyz - xyz.mean(axis=0)
     lab = np.arange(n) % g
     cnt = np.bincount(lab, minlength=g).astype(float)
-    sums = np.stack([np.bincount(lab, q[:, i], minlength=g) for i in range(3)], axis=1)
-    outer = np.einsum("ni,nj->nij", q, q)
-    raw = np.stack([np.stack([np.bincount(lab, outer[:, i, j], minlength=g) for j in range(3)], axis=1)
-                    for i in range(3)], axis=1)
+    sums = np.zeros((g, 3))
+    np.add.at(sums, lab, q)
+    raw = np.zeros((g, 3, 3))
+    np.add.at(raw, lab, np.einsum("ni,nj->nij", q, q))
     keep_n = n - cnt
     keep_sum = sums.sum(axis=0) - sums
     mean = keep_sum / keep_n[:, None]
