@@ -439,6 +439,28 @@ def test_points_of_a_crown_that_line_up_are_no_conductor():
     assert _not_wires(spans, geo, pts[:, 0], pts[:, 1], pts[:, 2], max_rms=0.2) == {1}
 
 
+def test_the_top_edge_of_a_wall_is_no_conductor():
+    """A straight, level line 3.5 m over the ground seen from the street, the top edge of a truck's
+    side (Oakland part3_ak): the side is below the height window, so only every point off the
+    ground shows it in a surface; wires stacked 0.3 m apart over one another are not a wall."""
+    from toolbox_plugins.powerlines.core import Span
+    from toolbox_plugins.powerlines.plugin import _not_wires
+
+    rng = np.random.default_rng(5)
+    L, z0 = 10.0, 9.7
+    top = np.column_stack([np.arange(0, L, 0.15), rng.normal(0, 0.01, 67), np.full(67, z0)])
+    # the side: vertical scan lines every 0.15 m along, a point every 2 cm down to 1.5 m
+    sl, zz = np.meshgrid(np.arange(0, L, 0.15), np.arange(z0 - 1.5, z0, 0.02))
+    side = np.column_stack([sl.ravel(), rng.normal(0, 0.01, sl.size), zz.ravel()])
+    stacked = np.vstack([top + [0, 5.0, -dz] for dz in (0.0, 0.3, 0.6, 0.9)])  # four wires 5 m aside
+    geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, L), (np.array([0.0, 5.0]), np.array([1.0, 0.0]), 0.0, L)]
+    spans = [Span(0, 0, 0, L / 2, 1e6, z0, 0.0, L, 0.01, 67, 0.0), Span(1, 0, 0, L / 2, 1e6, z0, 0.0, L, 0.01, 67, 0.0)]
+    cand = np.vstack([top, stacked])  # what the height window keeps
+    off_ground = np.vstack([top, side, stacked])
+    assert _not_wires(spans, geo, *cand.T, max_rms=0.2) == set()  # the window alone cannot tell
+    assert _not_wires(spans, geo, *cand.T, max_rms=0.2, below=tuple(off_ground.T)) == {0}
+
+
 def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):
     """A square bundle (four wires 0.6 m apart, ALS density) is volumetric in a 12-point
     neighbourhood; as a set it is a tube, so its points are wire candidates again. A crown

@@ -743,7 +743,7 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
 
 def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
                     min_run_m: float = 1.5, line_m: float = 0.1, max_tilt_deg: float = 70.0,
-                    min_cover: float = 0.3) -> bool:
+                    min_cover: float = 0.3, min_tilt_deg: float = 0.0) -> bool:
     """Whether a span lies in a surface: a scan row on a roof or the edge of an eave, which a
     mobile scanner sees as a thin straight line at a range where the surface is too sparse to
     count as one. ``s``, ``off``, ``dz``: candidate points along the line, across it and in
@@ -755,13 +755,16 @@ def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0
     ``line_m`` of that line fill every ``bin_m`` from the span out to ``min_run_m`` on one
     side, each bin along at least ``min_cover`` of the span's length and denser than the band
     just beside the line (a plane, not the volume of a crown). Four wires 0.4 m apart span
-    1.2 m with gaps; a pole or a cross arm holds a few metres of the span, not a third."""
+    1.2 m with gaps; a pole or a cross arm holds a few metres of the span, not a third.
+    Directions are tried from ``min_tilt_deg`` to ``max_tilt_deg`` either way (90: straight
+    down or up, the side of a wall or a truck whose top edge is the span)."""
     near = (s >= s_from) & (s <= s_to) & (np.abs(off) <= reach_m) & (np.abs(dz) <= reach_m)
     s, off, dz = s[near], off[near], dz[near]
     n_sbins = max(int(np.ceil(s_to - s_from)), 1)
     sbin = np.minimum(((s - s_from) // 1.0).astype(np.int64), n_sbins - 1)
     n_bins = int(round(min_run_m / bin_m))
-    for phi in np.radians(np.arange(-max_tilt_deg, max_tilt_deg + 1e-9, 5.0)):
+    tilts = np.arange(min_tilt_deg, max_tilt_deg + 1e-9, 5.0)
+    for phi in np.radians(np.unique(np.r_[-tilts, tilts])):
         t = off * np.cos(phi) + dz * np.sin(phi)
         n = np.abs(-off * np.sin(phi) + dz * np.cos(phi))
         on, beside = n <= line_m, (n > 2 * line_m) & (n <= 4 * line_m)

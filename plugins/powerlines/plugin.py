@@ -115,7 +115,8 @@ def _run(inputs, params, ctx):
     # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
     # volume, points of a crown that line up
     t = time.perf_counter()
-    not_wires = _not_wires(spans, geo, pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu, params["max_rms_3d_m"])
+    not_wires = _not_wires(spans, geo, pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu, params["max_rms_3d_m"],
+                           below=(pc.x[off] * hu, pc.y[off] * hu, pc.z[off] * vu))
     timings["not_wires_s"] = time.perf_counter() - t
     if not_wires:
         kept = [i for i in range(len(geo)) if i not in not_wires]
@@ -319,31 +320,44 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     return lines, geo, spans, line_of, wire_of_pt, len(th)
 
 
-def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0) -> set:
+def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None) -> set:
     """Conductors that are not wires seen in the cross-section of their fitted spans, over the
     candidates ``p*``: most span points in a surface (``span_on_surface``: a roof's scan row,
     an eave), or no denser within 0.1 m than 0.2-0.5 m around (under ``min_contrast`` times:
     points of a crown that happen to line up; a wire is a concentration of points, its
-    sub-conductors and neighbours sit at a few places around it)."""
+    sub-conductors and neighbours sit at a few places around it). ``below``: (x, y, z) of every
+    point off the ground, whatever its height: a span that is the top edge of a wall (a truck, a
+    fence seen from the street) is in a surface that reaches under the height window."""
     import numpy as np
 
     from .core import catenary, span_on_surface
+
+    def frame(qx, qy, qz, a, d, lo, hi, reach):
+        dx, dy = qx - a[0], qy - a[1]
+        s, off = dx * d[0] + dy * d[1], -dx * d[1] + dy * d[0]
+        near = np.flatnonzero((s >= lo) & (s <= hi) & (np.abs(off) <= reach))
+        return s[near], off[near], qz[near]
 
     out = set()
     for li, (a, d, _, _) in enumerate(geo):
         line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
         if not line_spans:
             continue
-        dx, dy = px - a[0], py - a[1]
-        s, off = dx * d[0] + dy * d[1], -dx * d[1] + dy * d[0]
         lo, hi = min(sp.s_from for sp in line_spans), max(sp.s_to for sp in line_spans)
         reach = 2.0 + max(abs(sp.offset) + abs(sp.offset_slope) * max(abs(lo), abs(hi)) for sp in line_spans)
-        near = np.flatnonzero((s >= lo) & (s <= hi) & (np.abs(off) <= reach))
-        s, off, z = s[near], off[near], pz[near]
+        s, off, z = frame(px, py, pz, a, d, lo, hi, reach)
+        if below is not None:
+            sb, offb, zb = frame(*below, a, d, lo, hi, reach)
         flat = core_n = ring_n = 0
         for sp in line_spans:
             o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
             if span_on_surface(s, o, dz, sp.s_from, sp.s_to):
+                flat += sp.n_points
+            elif below is not None and span_on_surface(
+                    sb, offb - sp.offset - sp.offset_slope * sb, zb - catenary(sb, sp.z0, sp.s0, sp.c), sp.s_from,
+                    sp.s_to, bin_m=0.1, min_run_m=1.0, min_tilt_deg=70.0, max_tilt_deg=90.0):
+                # a wall seen from the side is dense down its scan lines: every 0.1 m filled
+                # for a metre (wires stacked 0.3 m apart leave gaps)
                 flat += sp.n_points
             inside = (s >= sp.s_from) & (s <= sp.s_to)
             r = np.hypot(o[inside], dz[inside])
