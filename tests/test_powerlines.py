@@ -461,6 +461,77 @@ def test_the_top_edge_of_a_wall_is_no_conductor():
     assert _not_wires(spans, geo, *cand.T, max_rms=0.2, below=tuple(off_ground.T)) == {0}
 
 
+def _segment(rng, a, b, n, noise=0.02):
+    t = np.sort(rng.uniform(0, 1, n))
+    return np.asarray(a, float) + t[:, None] * (np.asarray(b, float) - np.asarray(a, float)) + rng.normal(0, noise, (n, 3))
+
+
+def test_straight_wires_finds_short_wires_fanning_from_a_pole_among_a_crown():
+    """Three wires of 5-6 m leaving one pole top at three heights and azimuths (a mobile scan's
+    view of wires across its street), linked by a crown to a thousand scattered points: each is
+    one run holding its own points, and nothing of the crown is a run."""
+    from toolbox_plugins.powerlines.core import straight_wires
+
+    rng = np.random.default_rng(3)
+    wires = [_segment(rng, (0, 0, 8.0), (0.5, -5.5, 8.1), 40), _segment(rng, (0, 0, 8.7), (-1.5, -5.0, 8.6), 40),
+             _segment(rng, (0, 0, 9.4), (2.0, -5.2, 9.2), 40)]
+    crown = rng.uniform([-4, 0, 6], [4, 6, 11], (1000, 3))
+    xyz = np.vstack(wires + [crown])
+    runs = straight_wires(xyz, 4.0, 2.5)
+    label = np.repeat([0, 1, 2, -1], [40, 40, 40, 1000])
+    got = sorted(np.bincount(label[r][label[r] >= 0], minlength=3).argmax() for r in runs)
+    assert got == [0, 1, 2]
+    for r in runs:
+        k = np.bincount(label[r][label[r] >= 0]).argmax()
+        assert (label[r] == k).sum() >= 36 and (label[r] == -1).sum() <= 2
+
+
+def _short_wire_scene(rng):
+    """A line of wires along x at 8 m with a pole at x = 20 (steep points), a wire leaving the
+    pole top across the line, a tower arm (body at x = 60, tip 5 m out, the conductor 2.5 m
+    under the tip), a cross arm under the wires at x = 40 and a scan row of a facade that
+    stands across the line."""
+    from toolbox.io.points import PointCloud
+
+    main = np.vstack([_segment(rng, (0, y, 8.0), (100, y, 8.0), 400) for y in (-1.0, 0.0, 1.0)])
+    pole = _segment(rng, (20, -0.3, 0.5), (20, -0.3, 8.5), 80, noise=0.03)
+    across = _segment(rng, (20.2, -0.4, 8.3), (20.8, -6.5, 8.2), 40)
+    body = _segment(rng, (60, 6.0, 0.5), (60, 6.0, 12.0), 120, noise=0.1)
+    arm = _segment(rng, (60, 6.2, 10.5), (60, 1.2, 10.5), 40)
+    tower_wire = _segment(rng, (30, 1.0, 8.0), (90, 1.0, 8.0), 240)  # under the arm's tip at y = 1.2
+    crossarm = _segment(rng, (40, -1.5, 7.6), (40, 3.0, 7.6), 40)
+    rows = [_segment(rng, (70, -3, 5 + k * 0.35), (70, -9, 5 + k * 0.35), 40) for k in range(8)]  # across too
+    parts = {"main": main, "pole": pole, "across": across, "body": body, "arm": arm, "tower_wire": tower_wire,
+             "crossarm": crossarm, "facade_row": rows[4], "facade": np.vstack(rows[:4] + rows[5:])}
+    xyz = np.vstack(list(parts.values()))
+    label = np.concatenate([[k] * len(v) for k, v in parts.items()])
+    return PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2]), label
+
+
+def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_facades():
+    """Of the straight runs left on no wire, only the wire that leaves the pole where the found
+    wires are held and leads away from them is a short wire; a tower's arm (the end nearer the
+    wires is its free tip), a cross arm under the wires (it does not lead away) and a scan row
+    of a facade (the next rows around it) are not."""
+    from toolbox_plugins.powerlines.plugin import _short_wires
+
+    rng = np.random.default_rng(8)
+    pc, label = _short_wire_scene(rng)
+    wired = np.flatnonzero(np.isin(label, ["main", "tower_wire"]))
+    steep = np.flatnonzero(np.isin(label, ["pole", "body"]))
+    free = np.flatnonzero(np.isin(label, ["across", "arm", "crossarm", "facade_row"]))
+    params = {"s_min_m": 8.0, "v_max_m": 2.5}
+    found = _short_wires(pc, free, np.arange(len(pc)), steep, wired, params, 1.0, 1.0)
+    assert found is not None
+    lines, geo, spans, line_of, wire_of, _ = found
+    assert len(geo) == 1 and len(lines["conductors"]) == 1 and len(spans) == 1
+    got = label[free[line_of == 0]]
+    assert (got == "across").sum() >= 38 and (got != "across").sum() == 0
+    across = np.column_stack([pc.x, pc.y])[label == "across"]
+    extent = np.ptp((across - across[0]) @ geo[0][1])
+    assert spans[0].rms <= 0.05 and spans[0].s_to - spans[0].s_from >= extent - 0.3
+
+
 def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):
     """A square bundle (four wires 0.6 m apart, ALS density) is volumetric in a 12-point
     neighbourhood; as a set it is a tube, so its points are wire candidates again. A crown
@@ -899,15 +970,18 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.69), ("part3_ak", 0.8, 0.9)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.72), ("part3_ak", 0.97, 0.9),
+                                                              ("part2_ai", 0.7, 0.79)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
-    points against the CMU wire labels (class 14). Floors under what is reached (part3_an, wires
-    0.3-1 m above one another: P 0.948 / R 0.705; R 0.306 before the catenary peel, 0.623 before
-    the second pass found the line past its bend; part3_ak, wires seen for 5-8 m between crowns:
-    0.818 / 0.931, R 0.674 while a wire piece had to be S_min long), not the issue's 0.90:
-    part2_ai's sparse upper wire among crowns and the short wires across the street at the
-    poles are still missed (see the issue notes)."""
+    points against the CMU wire labels (class 14). Floors under what is reached, not the issue's
+    0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.919 / R 0.727
+    (R 0.306 before the catenary peel, 0.623 before the second pass, 0.712 before the short
+    wires across the street; 2-4 m pieces of those are still missed); part3_ak, wires seen for
+    5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top edge was taken for a wire);
+    part2_ai: 0.717 / 0.800 (R 0.704 before the short wires; the sparse upper wire among crowns
+    is missed; 126 of the 161 points counted false are crown points around the lower wire where
+    it runs through crowns, median 0.17 m from the fitted wire)."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14

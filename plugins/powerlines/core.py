@@ -741,6 +741,92 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
     line_of[fi], wire_of_point[fi] = li, [line_spans[j].wire for j in k[got]]
 
 
+def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m: float = 0.08, min_points: int = 12,
+                   max_slope: float = 0.5, link_m: float = 1.0, n_samples: int = 300, seed: int = 0) -> list[np.ndarray]:
+    """Straight 3D runs of points (indices into ``xyz``, metres), strongest first: wires seen over
+    a few metres only, such as a mobile scanner's view of a wire crossing its street, too short
+    for the 2D Hough's S_min and not collinear in plan with their neighbours (wires fanning out
+    from a pole at several heights). Over a few metres a wire's sag is millimetres, so a
+    straight line is its model.
+
+    Per connected set (points ``link_m`` apart), sequential RANSAC: the line through two sampled
+    points with the most points within ``tol_m``, its longest run without a gap of
+    ``max_gap_m``, refitted (principal axis) and its points taken again; kept when the run is at
+    least ``min_length_m`` long, holds ``min_points`` and rises at most ``max_slope``. Its points
+    leave the set and the rest is searched again."""
+    from scipy.sparse.csgraph import connected_components as components
+
+    n = len(xyz)
+    if n < min_points:
+        return []
+    pairs = cKDTree(xyz).query_pairs(link_m, output_type="ndarray")
+    g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, comp = components(g, directed=False)
+    rng = np.random.default_rng(seed)
+    out = []
+    sizes = np.bincount(comp)
+    for k in np.flatnonzero(sizes >= min_points):
+        left = np.flatnonzero(comp == k)
+        while len(left) >= min_points:
+            run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng)
+            if run is None:
+                break
+            q = xyz[left[run]]
+            d = q[-1] - q[0]
+            if len(run) < min_points or abs(d[2]) > max_slope * np.hypot(d[0], d[1]):
+                break
+            out.append(left[run])
+            left = np.delete(left, run)
+    return out
+
+
+def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
+    """The most populous straight run in ``p`` (see straight_wires), its indices sorted along it,
+    or None when none reaches ``min_length_m``."""
+    n = len(p)
+    # pairs drawn locally (the second point within min_length / 2 of the first): a wire of 20
+    # points in a set of thousands (linked to a crown) is then drawn as often as the crown
+    i = rng.integers(0, n, min(max(n_samples, n), 4 * n_samples))
+    near = cKDTree(p).query_ball_point(p[i], min_length_m / 2)
+    j = np.array([nb[int(rng.integers(0, len(nb)))] for nb in near])
+    d = p[j] - p[i]
+    length = np.linalg.norm(d, axis=1)
+    ok = length >= min_length_m / 8
+    if not ok.any():
+        return None
+    i, d = i[ok], d[ok] / length[ok, None]
+    # distances of every point to every sampled line, in blocks to bound memory
+    best, best_n = None, 0
+    for b in range(0, len(i), 64):
+        rel = p[None, :, :] - p[i[b:b + 64], None, :]
+        t = np.einsum("lpk,lk->lp", rel, d[b:b + 64])
+        dist = np.linalg.norm(rel - t[..., None] * d[b:b + 64, None, :], axis=2)
+        counts = (dist <= tol_m).sum(axis=1)
+        m = int(np.argmax(counts))
+        if counts[m] > best_n:
+            best, best_n = (p[i[b + m]], d[b + m]), int(counts[m])
+    for _ in range(2):  # the run along the best line, refitted to its points
+        a, u = best
+        rel = p - a
+        t = rel @ u
+        on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
+        if len(on) < 2:
+            return None
+        run = _longest_run(t, on, max_gap_m)
+        if len(run) < 3:
+            return None
+        c = p[run].mean(axis=0)
+        _, _, vt = np.linalg.svd(p[run] - c, full_matrices=False)
+        best = (c, vt[0])
+    a, u = best
+    rel = p - a
+    t = rel @ u
+    on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
+    run = _longest_run(t, on, max_gap_m) if len(on) >= 2 else on
+    if len(run) < 2 or t[run].max() - t[run].min() < min_length_m:
+        return None
+    return run[np.argsort(t[run])]
+
 def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
                     min_run_m: float = 1.5, line_m: float = 0.1, max_tilt_deg: float = 70.0,
                     min_cover: float = 0.3, min_tilt_deg: float = 0.0) -> bool:

@@ -75,32 +75,21 @@ def _run(inputs, params, ctx):
         # catenaries that fit)
         t = time.perf_counter()
         found2 = _lines_and_wires(pc, free, hag, cell_used, params, ctx, {}, min_fit_share=0.5, optional=True)
-        if found2 is not None:
-            lines2, geo2, spans2, line_of2, wire2, _ = found2
-            # a line along one found already is the rest of its points (near a tower, a sparse
-            # stretch, past the end of its 2D extent), not another conductor: its wires are folded
-            # into that line's
-            along = {}  # pass-2 line -> the pass-1 line it runs along
-            for i, g in enumerate(geo2):
-                j = next((j for j, h in enumerate(geo) if _along(g, h, params["band_m"])), None)
-                if j is not None:
-                    along[i] = j
-            pos = np.flatnonzero(line_of < 0)  # where pass 2's points sit among pass 1's
-            if along:
-                spans, geo, lines = _fold_into(along, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of,
-                                               wire_of_pt, pos, hu)
-            new = [i for i in range(len(geo2)) if i not in along]
-            lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
-        if found2 is not None and len(geo2):
-            n0 = len(geo)
-            for sp in spans2:
-                sp.conductor += n0
-            geo, spans = geo + geo2, spans + spans2
-            mine = line_of2 >= 0  # the kept lines' points (the folded ones' are given out already)
-            line_of[pos[mine]] = line_of2[mine] + n0
-            wire_of_pt[pos[mine]] = wire2[mine]
-            lines = _append_conductors(lines, lines2, n0)
+        lines, geo, spans = _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params)
         timings["second_pass_s"] = time.perf_counter() - t
+    n_short = 0
+    if params["short_wires"]:
+        # what is left may hold wires seen over a few metres only (a mobile scanner's view of a
+        # wire across its street): straight 3D runs of S_min / 2, the shortest piece of wire the
+        # 3D step fits
+        t = time.perf_counter()
+        free = keep[line_of < 0]
+        wired = keep[line_of >= 0]
+        found3 = _short_wires(pc, free, off, idx[steep], wired, params, hu, vu)
+        n_before = len(geo)
+        lines, geo, spans = _add_pass(found3, lines, geo, spans, line_of, wire_of_pt, hu, params)
+        n_short = len(geo) - n_before
+        timings["short_wires_s"] = time.perf_counter() - t
 
     # candidates the shape test left out that lie on a fitted span are its points too: steep ones
     # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
@@ -184,7 +173,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
@@ -232,6 +221,118 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
         {"pylon": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     gdf.attrs["geometry_type"] = "Point Z"
     return gdf, tower, found
+
+
+def _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params):
+    """A further pass's result (``_lines_and_wires`` on the points on no wire, or None) added to
+    the first's: a line along one found already is the rest of its points (near a tower, a
+    sparse stretch, past the end of its 2D extent), not another conductor, so its wires are
+    folded into that line's; the others are appended as new conductors. ``line_of`` and
+    ``wire_of_pt`` are updated in place. Returns (lines, geo, spans)."""
+    import numpy as np
+
+    if found2 is None:
+        return lines, geo, spans
+    lines2, geo2, spans2, line_of2, wire2, _ = found2
+    along = {}  # pass-2 line -> the pass-1 line it runs along
+    for i, g in enumerate(geo2):
+        j = next((j for j, h in enumerate(geo) if _along(g, h, params["band_m"])), None)
+        if j is not None:
+            along[i] = j
+    pos = np.flatnonzero(line_of < 0)  # where pass 2's points sit among pass 1's
+    if along:
+        spans, geo, lines = _fold_into(along, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of,
+                                       wire_of_pt, pos, hu)
+    new = [i for i in range(len(geo2)) if i not in along]
+    lines2, geo2, spans2, line_of2, wire2 = _keep_conductors(new, lines2, geo2, spans2, line_of2, wire2)
+    if len(geo2):
+        n0 = len(geo)
+        for sp in spans2:
+            sp.conductor += n0
+        geo, spans = geo + geo2, spans + spans2
+        mine = line_of2 >= 0  # the kept lines' points (the folded ones' are given out already)
+        line_of[pos[mine]] = line_of2[mine] + n0
+        wire_of_pt[pos[mine]] = wire2[mine]
+        lines = _append_conductors(lines, lines2, n0)
+    return lines, geo, spans
+
+
+def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around: float = 0.5,
+                 reach_m: float = 5.0, structure_m: float = 1.5):
+    """Straight 3D runs among the wire-like points ``free`` (indices into ``pc``) as a further
+    pass's result for ``_add_pass`` (one conductor and one straight span per run), or None.
+    A run is kept when
+    * it stands alone in its cross-section: among the points ``off_ground``, those 0.2-0.5 m
+      from it (over its length) number under ``max_around`` times its own (a scan row on a
+      facade has the next rows there; wires stacked 0.7 m apart do not);
+    * it joins the wires found (``wired``) at a support: one end within ``reach_m`` of them
+      (a pole's cross arm and insulators), and leads away from them at 30 degrees or more (its
+      other end half its length farther; a cross arm lies along under them);
+    * it is not a tower's arm: the end nearer the wires found is the one at a structure (at
+      least as many ``steep`` points within ``structure_m``). A wire across the street leaves
+      the pole where the line's wires are held; an arm reaches from the tower's body out to
+      where the conductors hang under its tip."""
+    import geopandas as gpd
+    import numpy as np
+    from scipy.spatial import cKDTree
+    from shapely.geometry import LineString
+
+    from .core import _span, fit_catenary, straight_wires
+
+    if len(free) < 12 or len(wired) == 0:
+        return None
+    xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
+    origin = xyz.min(axis=0)
+    runs = straight_wires(xyz - origin, params["s_min_m"] / 2, params["v_max_m"])
+    if not runs:
+        return None
+
+    def local(ix):
+        return cKDTree(np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin)
+
+    every, wires, structure = local(off_ground), local(wired), local(steep) if len(steep) else None
+    alone = []
+    for run in runs:
+        q = xyz[run] - origin
+        u = (q[-1] - q[0]) / max(np.linalg.norm(q[-1] - q[0]), 1e-9)
+        near = np.unique(np.concatenate(every.query_ball_point(q, 0.5)))
+        rel = every.data[near] - q[0]
+        t = rel @ u
+        r = np.linalg.norm(rel - t[:, None] * u, axis=1)
+        around = int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= float((q[-1] - q[0]) @ u))).sum())
+        ends = q[[0, -1]]
+        to_wires = wires.query(ends)[0]
+        at_structure = [len(structure.query_ball_point(e, structure_m)) if structure is not None else 0 for e in ends]
+        nearer = int(np.argmin(to_wires))
+        leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
+        if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
+                at_structure[nearer] >= at_structure[1 - nearer]:
+            alone.append(run)
+    runs = alone
+    if not runs:
+        return None
+    geo, spans, rows, segs = [], [], [], []
+    line_of = np.full(len(free), -1, np.int64)
+    for li, run in enumerate(runs):
+        q = xyz[run]
+        a = q[0, :2]
+        d = q[-1, :2] - a
+        L = float(np.hypot(*d))
+        d = d / max(L, 1e-9)
+        s, off = (q[:, :2] - a) @ d, (q[:, :2] - a) @ np.array([-d[1], d[0]])
+        geo.append((a, d, 0.0, L))
+        spans.append(_span(li, 0, 0, s, off, fit_catenary(s, q[:, 2])))
+        line_of[run] = li
+        g = LineString([a / hu, (a + L * d) / hu])
+        rows.append({"conductor": li, "votes": len(run), "n_points": len(run), "length_m": L,
+                     "rms_m": float(np.sqrt(np.mean(off ** 2))),
+                     "azimuth_deg": float(np.degrees(np.arctan2(d[0], d[1])) % 180.0), "geometry": g})
+        segs.append({"conductor": li, "segment": 0, "length_m": L, "geometry": g})
+    lines = {"conductors": gpd.GeoDataFrame(rows, geometry="geometry", crs=pc.crs),
+             "conductor_segments": gpd.GeoDataFrame(segs, geometry="geometry", crs=pc.crs),
+             "crossings": gpd.GeoDataFrame({"n_lines": [], "angle_deg": [], "conductors": []},
+                                           geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)}
+    return lines, geo, spans, line_of, np.where(line_of >= 0, 0, -1), 0
 
 
 def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0) -> set:
@@ -516,8 +617,11 @@ def toolbox_algorithms():
             "pieces between cuts or occlusions from S_min / 2); a conductor holds a span of S_min that fits, hangs "
             "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
             "searched once more (second_pass: a line's stretch past a bend; a line along one found already is folded "
-            "into it; crossings between lines of the two passes are not computed); a conductor must stand out in its cross-section (not a roof's scan row or "
-            "an eave in a surface, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
+            "into it; crossings between lines of the two passes are not computed), and what is still left for "
+            "straight 3D runs of S_min / 2 (short_wires: a mobile scan's wires across the street, fanning from "
+            "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
+            "cross-section; n_short_wires); a conductor must stand out in its cross-section (not a roof's scan row or "
+            "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
             "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
@@ -568,6 +672,9 @@ def toolbox_algorithms():
                       "least S_min with a small residual, gentle slope and thin across the line)"),
             Parameter("second_pass", bool, True, "search the wire-like points left on no wire once more (a line's "
                       "stretch past a bend, wires outvoted in a tile); its lines must hold mostly wire"),
+            Parameter("short_wires", bool, True, "search what is left for straight 3D runs of wire-like points "
+                      "S_min / 2 long: wires seen over a few metres only (a mobile scan's wires across the street) "
+                      "that the 2D Hough's S_min misses"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
