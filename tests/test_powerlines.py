@@ -532,6 +532,34 @@ def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_fac
     assert spans[0].rms <= 0.05 and spans[0].s_to - spans[0].s_from >= extent - 0.3
 
 
+def test_arms_of_a_tower_with_or_without_its_line_found():
+    """A tower 8 m across (cells of 1 m): an arm across its line is a tower's arm (both ends in
+    reach, a longer line across it); where the line is not found beside the tower (a gap in the
+    data), an arm within the tower's own extent is still one; a wire of a pole 2 m across that
+    leaves it and ends 6 m away (a wire across the street) is not."""
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.core import Pylon
+    from toolbox_plugins.powerlines.plugin import _arms
+
+    def tower(x, y, half):
+        grid = (0.0, 0.0, 1.0, 200, 200)
+        rr, cc = np.meshgrid(np.arange(int(y - half), int(y + half)), np.arange(int(x - half), int(x + half)), indexing="ij")
+        return Pylon(x, y, 30.0, 2, 0.0, (rr * 200 + cc).ravel(), grid)
+
+    big, pole = tower(50.0, 50.0, 4), tower(150.0, 50.0, 1)
+    line = LineString([(0, 50), (30, 50)])  # the line, not found past x = 30
+    arm_across = LineString([(50, 48), (50, 44)])  # its cells reach 5.9 m from the centre
+    street = LineString([(150, 51), (150, 57)])  # from the pole across the street
+    cond = gpd.GeoDataFrame({"conductor": range(4)}, geometry=[line, arm_across, street, LineString([(51, 52), (51, 56)])])
+    assert _arms(cond, [big, pole], 1.0) == {1, 3}
+    # the line found past the tower: the arm crosses it (the rule with the 10 m reach)
+    cond2 = gpd.GeoDataFrame({"conductor": range(2)}, geometry=[LineString([(0, 50), (100, 50)]),
+                                                                 LineString([(52, 41), (52, 51)])])
+    assert _arms(cond2, [big], 1.0) == {1}
+    assert _arms(cond2, [], 1.0) == set()
+
+
 def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):
     """A square bundle (four wires 0.6 m apart, ALS density) is volumetric in a 12-point
     neighbourhood; as a set it is a tube, so its points are wire candidates again. A crown

@@ -340,7 +340,9 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
     conductor reaching the same tower at ``min_angle_deg`` or more: straight, level lines that
     never leave the tower, across its line, are its arms. (A short wire to a pole with nothing
-    across it stays a wire.)"""
+    across it stays a wire.) A conductor within the tower's own extent (its cells' reach and a
+    metre) is part of it whatever crosses it: the arms of a tower whose line is not found there
+    (a gap in the data beside it)."""
     if not found or not len(cond):
         return set()
     import numpy as np
@@ -351,13 +353,14 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
         x0, y0, cell_m, rows, cols = p.grid
         r, c = np.divmod(np.asarray(p.cells), cols)
         far = np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max() + cell_m
-        towers.append((p.x, p.y, max(end_radius_m, far)))
+        towers.append((p.x, p.y, max(end_radius_m, far), far + 1.0))
     lines = [LineString(np.asarray(g.coords)[:, :2] * hu) for g in cond.geometry]
     ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
     unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
     arms = set()
-    for x, y, reach in towers:
+    for x, y, reach, own in towers:
         inside = [i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= reach).all()]
+        arms |= {i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= own).all()}
         at = Point(x, y)
         for i in inside:
             across = [j for j, g in enumerate(lines) if j not in inside and g.distance(at) <= reach
