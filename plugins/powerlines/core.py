@@ -767,7 +767,7 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     sizes = np.bincount(comp)
     for k in np.flatnonzero(sizes >= min_points):
         left = np.flatnonzero(comp == k)
-        while len(left) >= min_points:
+        while len(left) >= min_points and np.linalg.norm(np.ptp(xyz[left], axis=0)) >= min_length_m:
             run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng)
             if run is None:
                 break
@@ -787,7 +787,8 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     # pairs drawn locally (the second point within min_length / 2 of the first): a wire of 20
     # points in a set of thousands (linked to a crown) is then drawn as often as the crown
     i = rng.integers(0, n, min(max(n_samples, n), 4 * n_samples))
-    near = cKDTree(p).query_ball_point(p[i], min_length_m / 2)
+    tree = cKDTree(p)
+    near = tree.query_ball_point(p[i], min_length_m / 2)
     j = np.array([nb[int(rng.integers(0, len(nb)))] for nb in near])
     d = p[j] - p[i]
     length = np.linalg.norm(d, axis=1)
@@ -795,16 +796,16 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     if not ok.any():
         return None
     i, d = i[ok], d[ok] / length[ok, None]
-    # distances of every point to every sampled line, in blocks to bound memory
-    best, best_n = None, 0
-    for b in range(0, len(i), 64):
-        rel = p[None, :, :] - p[i[b:b + 64], None, :]
-        t = np.einsum("lpk,lk->lp", rel, d[b:b + 64])
-        dist = np.linalg.norm(rel - t[..., None] * d[b:b + 64, None, :], axis=2)
-        counts = (dist <= tol_m).sum(axis=1)
-        m = int(np.argmax(counts))
-        if counts[m] > best_n:
-            best, best_n = (p[i[b + m]], d[b + m]), int(counts[m])
+    # each line's support counted where its pair was drawn (within min_length / 2 of its first
+    # point), all lines at once over their neighbourhoods
+    nb = [near[k] for k in np.flatnonzero(ok)]
+    sid = np.repeat(np.arange(len(i)), [len(x) for x in nb])
+    flat = np.concatenate(nb).astype(np.int64)
+    rel = p[flat] - p[i][sid]
+    t = np.einsum("ij,ij->i", rel, d[sid])
+    counts = np.bincount(sid, weights=(np.einsum("ij,ij->i", rel, rel) - t * t) <= tol_m * tol_m, minlength=len(i))
+    m = int(np.argmax(counts))
+    best = (p[i[m]], d[m])
     for _ in range(2):  # the run along the best line, refitted to its points
         a, u = best
         rel = p - a

@@ -268,8 +268,8 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around:
     * it joins the wires found (``wired``) at a support: one end within ``reach_m`` of them
       (a pole's cross arm and insulators), and leads away from them at 30 degrees or more (its
       other end half its length farther; a cross arm lies along under them);
-    * it is not a tower's arm: the end nearer the wires found is the one at a structure (at
-      least as many ``steep`` points within ``structure_m``). A wire across the street leaves
+    * it is not a tower's arm: the end nearer the wires found is the one at a structure (more
+      ``steep`` points within ``structure_m`` than at the other). A wire across the street leaves
       the pole where the line's wires are held; an arm reaches from the tower's body out to
       where the conductors hang under its tip."""
     import geopandas as gpd
@@ -306,7 +306,7 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around:
         nearer = int(np.argmin(to_wires))
         leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
         if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
-                at_structure[nearer] >= at_structure[1 - nearer]:
+                at_structure[nearer] > at_structure[1 - nearer]:
             alone.append(run)
     runs = alone
     if not runs:
