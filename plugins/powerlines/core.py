@@ -743,7 +743,7 @@ def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m:
 
 def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m: float = 0.08, min_points: int = 12,
                    max_slope: float = 0.5, link_m: float = 1.0, n_samples: int = 300, seed: int = 0) -> list[np.ndarray]:
-    """Straight 3D runs of points (indices into ``xyz``, metres), strongest first: wires seen over
+    """Straight 3D runs of points (indices into ``xyz``, metres): wires seen over
     a few metres only, such as a mobile scanner's view of a wire crossing its street, too short
     for the 2D Hough's S_min and not collinear in plan with their neighbours (wires fanning out
     from a pole at several heights). Over a few metres a wire's sag is millimetres, so a
@@ -753,7 +753,7 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     points with the most points within ``tol_m``, its longest run without a gap of
     ``max_gap_m``, refitted (principal axis) and its points taken again; kept when the run is at
     least ``min_length_m`` long, holds ``min_points`` and rises at most ``max_slope``. Its points
-    leave the set and the rest is searched again."""
+    leave the set and the rest is searched again (strongest first within each set)."""
     from scipy.sparse.csgraph import connected_components as components
 
     n = len(xyz)
@@ -805,28 +805,26 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     t = np.einsum("ij,ij->i", rel, d[sid])
     counts = np.bincount(sid, weights=(np.einsum("ij,ij->i", rel, rel) - t * t) <= tol_m * tol_m, minlength=len(i))
     m = int(np.argmax(counts))
-    best = (p[i[m]], d[m])
+    a, u = p[i[m]], d[m]
     for _ in range(2):  # the run along the best line, refitted to its points
-        a, u = best
-        rel = p - a
-        t = rel @ u
-        on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
-        if len(on) < 2:
-            return None
-        run = _longest_run(t, on, max_gap_m)
+        t, run = _run_along(p, a, u, tol_m, max_gap_m)
         if len(run) < 3:
             return None
-        c = p[run].mean(axis=0)
-        _, _, vt = np.linalg.svd(p[run] - c, full_matrices=False)
-        best = (c, vt[0])
-    a, u = best
-    rel = p - a
-    t = rel @ u
-    on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
-    run = _longest_run(t, on, max_gap_m) if len(on) >= 2 else on
+        a = p[run].mean(axis=0)
+        u = np.linalg.svd(p[run] - a, full_matrices=False)[2][0]
+    t, run = _run_along(p, a, u, tol_m, max_gap_m)
     if len(run) < 2 or t[run].max() - t[run].min() < min_length_m:
         return None
     return run[np.argsort(t[run])]
+
+
+def _run_along(p, a, u, tol_m, max_gap_m):
+    """(positions along the line through ``a`` along unit ``u``, the longest run of the points
+    of ``p`` within ``tol_m`` of it without a gap of ``max_gap_m``)."""
+    rel = p - a
+    t = rel @ u
+    on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
+    return t, (_longest_run(t, on, max_gap_m) if len(on) >= 2 else on)
 
 def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
                     min_run_m: float = 1.5, line_m: float = 0.1, max_tilt_deg: float = 70.0,

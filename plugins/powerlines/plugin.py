@@ -291,7 +291,7 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around:
         return cKDTree(np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin)
 
     every, wires, structure = local(off_ground), local(wired), local(steep) if len(steep) else None
-    alone = []
+    kept = []
     for run in runs:
         q = xyz[run] - origin
         u = (q[-1] - q[0]) / max(np.linalg.norm(q[-1] - q[0]), 1e-9)
@@ -307,8 +307,8 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around:
         leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
         if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
                 at_structure[nearer] > at_structure[1 - nearer]:
-            alone.append(run)
-    runs = alone
+            kept.append(run)
+    runs = kept
     if not runs:
         return None
     geo, spans, rows, segs = [], [], [], []
