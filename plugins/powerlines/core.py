@@ -762,11 +762,15 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     pairs = cKDTree(xyz).query_pairs(link_m, output_type="ndarray")
     g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, comp = components(g, directed=False)
-    rng = np.random.default_rng(seed)
     out = []
     sizes = np.bincount(comp)
     for k in np.flatnonzero(sizes >= min_points):
         left = np.flatnonzero(comp == k)
+        # a set's points in the order of their coordinates and its own random stream: a tile of a
+        # survey that holds the set whole draws as a run on the whole does
+        cm = np.round(xyz[left] - xyz[left].min(axis=0), 3)
+        left = left[np.lexsort(cm.T[::-1])]
+        rng = np.random.default_rng([seed, len(left)])
         while len(left) >= min_points and np.linalg.norm(np.ptp(xyz[left], axis=0)) >= min_length_m:
             run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng)
             if run is None:
