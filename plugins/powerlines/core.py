@@ -9,6 +9,8 @@
   z = z0 + c·(cosh((s - s0)/c) - 1) is fitted per span in its vertical plane; where one does
   not fit (wires stacked closer than the height link, clutter linked to a wire),
   ``peel_catenaries`` takes them out one at a time.
+* ``short_wires``: wires seen over a few metres only (a mobile scan's wires across the street),
+  straight 3D runs that leave the wires found at a support.
 """
 
 from __future__ import annotations
@@ -783,6 +785,48 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
             left = np.delete(left, run)
     return out
 
+
+
+def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wired: np.ndarray, min_length_m: float,
+                max_gap_m: float, max_around: float = 0.5, reach_m: float = 5.0,
+                structure_m: float = 1.5) -> list[np.ndarray]:
+    """The ``straight_wires`` runs of ``xyz`` (wire-like points on no wire) that are wires seen
+    over a few metres, given the points off the ground, those of structures (``steep``: poles,
+    tower bodies) and those of the wires found (``wired``), all (n, 3) in one frame. A run is kept
+    when
+    * it stands alone in its cross-section: among ``off_ground``, the points 0.2-0.5 m from it
+      (over its length) number under ``max_around`` times its own (a scan row on a facade has
+      the next rows there; wires stacked 0.7 m apart do not);
+    * it joins the wires found at a support: one end within ``reach_m`` of them (a pole's cross
+      arm and insulators), and leads away from them at 30 degrees or more (its other end half
+      its length farther; a cross arm lies along under them);
+    * it is not a tower's arm: the end nearer the wires found is the one at a structure (more
+      ``steep`` points within ``structure_m`` than at the other). A wire across the street leaves
+      the pole where the line's wires are held; an arm reaches from the tower's body out to
+      where the conductors hang under its tip."""
+    runs = straight_wires(xyz, min_length_m, max_gap_m)
+    if not runs or not len(wired):
+        return []
+    every, wires = cKDTree(off_ground), cKDTree(wired)
+    structure = cKDTree(steep) if len(steep) else None
+    kept = []
+    for run in runs:
+        q = xyz[run]
+        u = (q[-1] - q[0]) / max(np.linalg.norm(q[-1] - q[0]), 1e-9)
+        near = np.unique(np.concatenate(every.query_ball_point(q, 0.5)))
+        rel = every.data[near] - q[0]
+        t = rel @ u
+        r = np.linalg.norm(rel - t[:, None] * u, axis=1)
+        around = int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= float((q[-1] - q[0]) @ u))).sum())
+        ends = q[[0, -1]]
+        to_wires = wires.query(ends)[0]
+        at_structure = [len(structure.query_ball_point(e, structure_m)) if structure is not None else 0 for e in ends]
+        nearer = int(np.argmin(to_wires))
+        leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
+        if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
+                at_structure[nearer] > at_structure[1 - nearer]:
+            kept.append(run)
+    return kept
 
 def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     """The most populous straight run in ``p`` (see straight_wires), its indices sorted along it,

@@ -257,58 +257,26 @@ def _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params):
     return lines, geo, spans
 
 
-def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, max_around: float = 0.5,
-                 reach_m: float = 5.0, structure_m: float = 1.5):
-    """Straight 3D runs among the wire-like points ``free`` (indices into ``pc``) as a further
-    pass's result for ``_add_pass`` (one conductor and one straight span per run), or None.
-    A run is kept when
-    * it stands alone in its cross-section: among the points ``off_ground``, those 0.2-0.5 m
-      from it (over its length) number under ``max_around`` times its own (a scan row on a
-      facade has the next rows there; wires stacked 0.7 m apart do not);
-    * it joins the wires found (``wired``) at a support: one end within ``reach_m`` of them
-      (a pole's cross arm and insulators), and leads away from them at 30 degrees or more (its
-      other end half its length farther; a cross arm lies along under them);
-    * it is not a tower's arm: the end nearer the wires found is the one at a structure (more
-      ``steep`` points within ``structure_m`` than at the other). A wire across the street leaves
-      the pole where the line's wires are held; an arm reaches from the tower's body out to
-      where the conductors hang under its tip."""
+def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
+    """``short_wires`` among the wire-like points ``free`` (indices into ``pc``; ``off_ground``,
+    ``steep``, ``wired``: the points off the ground, of structures and of the wires found) as a
+    further pass's result for ``_add_pass`` (one conductor and one straight span per run), or None."""
     import geopandas as gpd
     import numpy as np
-    from scipy.spatial import cKDTree
     from shapely.geometry import LineString
 
-    from .core import _span, fit_catenary, straight_wires
+    from .core import _span, fit_catenary, short_wires
 
     if len(free) < 12 or len(wired) == 0:
         return None
     xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
     origin = xyz.min(axis=0)
-    runs = straight_wires(xyz - origin, params["s_min_m"] / 2, params["v_max_m"])
-    if not runs:
-        return None
 
     def local(ix):
-        return cKDTree(np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin)
+        return np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin
 
-    every, wires, structure = local(off_ground), local(wired), local(steep) if len(steep) else None
-    kept = []
-    for run in runs:
-        q = xyz[run] - origin
-        u = (q[-1] - q[0]) / max(np.linalg.norm(q[-1] - q[0]), 1e-9)
-        near = np.unique(np.concatenate(every.query_ball_point(q, 0.5)))
-        rel = every.data[near] - q[0]
-        t = rel @ u
-        r = np.linalg.norm(rel - t[:, None] * u, axis=1)
-        around = int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= float((q[-1] - q[0]) @ u))).sum())
-        ends = q[[0, -1]]
-        to_wires = wires.query(ends)[0]
-        at_structure = [len(structure.query_ball_point(e, structure_m)) if structure is not None else 0 for e in ends]
-        nearer = int(np.argmin(to_wires))
-        leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
-        if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
-                at_structure[nearer] > at_structure[1 - nearer]:
-            kept.append(run)
-    runs = kept
+    runs = short_wires(xyz - origin, local(off_ground), local(steep), local(wired), params["s_min_m"] / 2,
+                       params["v_max_m"])
     if not runs:
         return None
     geo, spans, rows, segs = [], [], [], []
