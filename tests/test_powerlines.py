@@ -634,6 +634,43 @@ def test_points_on_spans_take_what_lies_on_a_fitted_catenary():
     assert (points_on_spans([sp], [(anchor, direction, 0.0, 40.0)], xy[:, 0], xy[:, 1], z, 0.2)[0] == -1).all()
 
 
+def test_span_ends_grow_along_the_catenary_up_to_a_pole_or_a_gap():
+    """A span's catenary continued past its ends takes the wire points the candidates left out
+    (under the height window, beside a tower), outward from each end: not past a gap over
+    max_gap_m, not into a pole (its column holds more points off the catenary than on it), not
+    beyond reach_m, nothing aside or above the wire, nothing already on a wire."""
+    from toolbox_plugins.powerlines.core import Span, grow_span_ends
+
+    anchor, direction = np.array([100.0, 50.0]), np.array([0.6, 0.8])
+    normal = np.array([-direction[1], direction[0]])
+    sp = Span(0, 1, 0, 50.0, 500.0, 12.0, 20.0, 80.0, 0.03, 200, 0.4)
+    s = np.arange(0.0, 100.0, 0.5)
+    s = s[(s < 8.0) | (s > 12.0)]  # a 4.5 m gap in the wire's points before s = 12.5
+    z = catenary(s, 12.0, 50.0, 500.0) + np.where(np.arange(len(s)) % 2, 0.03, -0.03)
+    pole_z = np.arange(0.0, 14.0, 0.1)  # a pole at s = 90 under and above the wire
+    s = np.r_[s, np.full(len(pole_z), 90.0), 85.0, 86.0]
+    off = np.r_[np.zeros(len(s) - 2), 0.6, 0.0]  # then one point 0.6 m aside, one 0.4 m above
+    z = np.r_[z, pole_z, catenary(np.array([85.0, 86.0]), 12.0, 50.0, 500.0) + [0.0, 0.4]]
+    xy = anchor + s[:, None] * direction + off[:, None] * normal
+    free = (s < 20.0) | (s > 80.0)
+    lines = [(anchor, direction, 0.0, 100.0)]
+    line_of, wire_of = grow_span_ends([sp], lines, xy[:, 0], xy[:, 1], z, free, 0.2, max_gap_m=2.5, reach_m=16.0)
+    taken = line_of >= 0
+    wire = np.arange(len(s)) < len(s) - len(pole_z) - 2
+    assert (wire_of[taken] == 1).all() and not taken[~free].any()
+    assert taken[wire & (s >= 12.5) & (s < 20.0)].all() and not taken[wire & (s < 8.0)].any()  # the gap
+    assert taken[wire & (s > 80.0) & (s < 89.5)].all()  # up to the pole
+    assert not taken[wire & (s > 90.5)].any() and not taken[~wire].any()  # the pole, what is past it, off it
+    # without the pole, the reach stops it
+    keep = wire
+    line_of, _ = grow_span_ends([sp], lines, xy[keep, 0], xy[keep, 1], z[keep], free[keep], 0.2, max_gap_m=2.5,
+                                reach_m=16.0)
+    sw = s[keep]
+    assert (line_of[(sw > 80.0) & (sw <= 96.0)] == 0).all() and (line_of[sw > 96.0] == -1).all()
+    sp.rms = 0.5  # a span that is not a wire grows nothing
+    assert (grow_span_ends([sp], lines, xy[:, 0], xy[:, 1], z, free, 0.2, 2.5, 16.0)[0] == -1).all()
+
+
 def test_a_span_records_how_thin_its_points_are_across_the_line():
     """A wire's lateral scatter about its straight plan trend is what the 3D validation tests
     (WIRE_LATERAL_RMS_M): a drifting but thin wire passes, a crown edge's spread does not."""
@@ -835,8 +872,9 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     assert len(found) == len(truth["conductor_lines_2d"]) == len(cond) == 5
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    # recall 0.960 measured: points the shape test called flat where the phases share a neighbourhood
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.95
+    # recall 0.972 measured (0.960 before spans grew past their ends: beside a tower the shape test
+    # sees the structure in a wire point's neighbourhood)
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.97
     assert rep["stats"]["n_pylons"] >= 10
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6  # line B over each phase: not averaged into one
@@ -862,7 +900,9 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
         assert np.min(np.hypot(cr.geometry.x - c["x"], cr.geometry.y - c["y"])) <= 0.05
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.9
+    # 0.995 / 0.979 measured (recall 0.960 before spans grew past their ends: on the hill line B's
+    # wires hang under the 3.5 m window)
+    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.97
 
 
 def test_corridor_variants_have_their_geometry():
@@ -919,7 +959,7 @@ def test_mobile_scanner_scene_thins_with_range():
 
 
 @pytest.mark.parametrize("variant, extra, min_recall", [
-    ("stacked", {}, 0.985),  # three phases 5 m above one another on each side (0.994 measured)
+    ("stacked", {}, 0.99),  # three phases 5 m above one another on each side (0.997 measured)
     ("distribution", {"slope_pct": 25.0}, 0.9),  # a 25 % hillside, trees under and beside the wires
     # phases in triangle and square bundles (0.989 and 0.982 measured; 0.43 and 0.29 before the
     # wire-like tubes and the split in height): in plan one conductor per phase where the
@@ -980,7 +1020,7 @@ def test_wire_points_on_synthetic_truth(corridor_result, corridor):
     t = laspy.read(corridor).classification == 14
     p = laspy.read(wires).classification == 14
     precision, recall = (t & p).sum() / p.sum(), (t & p).sum() / t.sum()
-    assert precision >= 0.98 and recall >= 0.98  # 0.999 / 0.988 measured
+    assert precision >= 0.98 and recall >= 0.99  # 0.999 / 0.995 measured
 
 
 def _ahn4_real(name, tmp_path):
@@ -992,10 +1032,12 @@ def _ahn4_real(name, tmp_path):
     return tmp_path / f"{name}.laz", sub
 
 
-@pytest.mark.parametrize("name, min_recall", [("07CZ2_14", 0.975), ("12AN2_20", 0.955)])
-def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
-    """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (12AN2_20's
-    sparse earth wires on top are the misses left: see the issue notes), and the tile's one tower
+@pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.985), ("12AN2_20", 0.98, 0.955)])
+def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, tmp_path):
+    """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (measured
+    0.994 / 0.991 and 0.982 / 0.962; 12AN2_20's sparse earth wires on top are the misses left: see
+    the issue notes; the producer counts the wire across a tower's footprint as tower, and so do
+    we: P 0.978 while spans grew across it), and the tile's one tower
     (the producer's class 15) found within 2 m, nothing else taken for one."""
     path, sub = _ahn4_real(name, tmp_path)
     rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992",
@@ -1005,7 +1047,7 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     out = laspy.read(tmp_path / "w.laz").classification
     pred = out == 14
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
-    assert precision >= 0.97 and recall >= min_recall, (precision, recall)
+    assert precision >= min_precision and recall >= min_recall, (precision, recall)
     tower = np.asarray(sub.classification) == 15
     tx, ty = np.asarray(sub.x)[tower], np.asarray(sub.y)[tower]
     py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
@@ -1015,16 +1057,17 @@ def test_ahn4_corridors_at_default_parameters(name, min_recall, tmp_path):
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.72), ("part3_ak", 0.97, 0.9),
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.75), ("part3_ak", 0.97, 0.9),
                                                               ("part2_ai", 0.7, 0.79)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors under what is reached, not the issue's
-    0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.916 / R 0.732
+    0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.917 / R 0.757
     (R 0.306 before the catenary peel, 0.623 before the second pass, 0.712 before the short
-    wires across the street; 2-4 m pieces of those are still missed); part3_ak, wires seen for
+    wires across the street, 0.732 before spans grew past their ends; 2-4 m pieces of those
+    are still missed); part3_ak, wires seen for
     5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top edge was taken for a wire);
-    part2_ai: 0.717 / 0.798 (R 0.704 before the short wires; the sparse upper wire among crowns
+    part2_ai: 0.718 / 0.802 (R 0.704 before the short wires; the sparse upper wire among crowns
     is missed; 126 of the 161 points counted false are crown points around the lower wire where
     it runs through crowns, median 0.17 m from the fitted wire)."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")

@@ -936,6 +936,60 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
     return line_of, wire_of
 
 
+def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float,
+                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0):
+    """For points outside the 3D step's candidates (under the height window, or left by the shape
+    test next to a tower where a wire's neighbourhood leans on the structure): the conductor and
+    wire of the fitted span whose catenary, continued past either end, they extend, else -1.
+
+    From each end outward, ``free`` points within ``lateral_m`` in plan and the span's fit
+    tolerance are taken while no gap along the line exceeds ``max_gap_m``, up to ``reach_m``, and
+    stop at the first whose column (``column_m`` in plan, ``column_dz_m`` up and down) holds more
+    points off the catenary than on it: the pole, arm or crown the wire meets. ``px, py, pz``: the
+    off-ground points, ``free`` those not on a wire yet. ``lines`` as for conductors_3d."""
+    from scipy.spatial import cKDTree
+
+    line_of = np.full(len(px), -1, np.int64)
+    wire_of = np.full(len(px), -1, np.int64)
+    best = np.full(len(px), np.inf)
+    for li in sorted({sp.conductor for sp in spans if sp.rms <= max_rms}):
+        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
+        anchor, direction, _, _ = lines[li]
+        dx, dy = px - anchor[0], py - anchor[1]
+        s = dx * direction[0] + dy * direction[1]
+        off = -dx * direction[1] + dy * direction[0]
+        for sp in line_spans:
+            tol = max(3 * sp.rms, 0.15)
+            for end, sign in ((sp.s_to, 1.0), (sp.s_from, -1.0)):
+                out = sign * (s - end)
+                zone = np.flatnonzero((out > -column_m) & (out <= reach_m + column_m))
+                lat = np.abs(off[zone] - (sp.offset + sp.offset_slope * s[zone]))
+                zone, lat = zone[lat <= lateral_m + column_m], lat[lat <= lateral_m + column_m]
+                dz = pz[zone] - catenary(s[zone], sp.z0, sp.s0, sp.c)
+                on = (lat <= lateral_m) & (np.abs(dz) <= tol)
+                cand = np.flatnonzero(on & free[zone] & (out[zone] > 0))
+                if not len(cand):
+                    continue
+                cand = cand[np.argsort(out[zone[cand]])]
+                steps = np.diff(np.r_[0.0, out[zone[cand]]])
+                cand = cand[: int(np.argmax(np.r_[steps, np.inf] > max_gap_m))]
+                tree = cKDTree(np.column_stack([s[zone], off[zone]]))
+                taken = []
+                for k, nb in zip(cand, tree.query_ball_point(np.column_stack([s[zone[cand]], off[zone[cand]]]),
+                                                             column_m)):
+                    nb = np.asarray(nb)
+                    nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
+                    if on[nb].sum() < (~on[nb]).sum():
+                        break
+                    taken.append(zone[k])
+                taken = np.asarray(taken, np.int64)
+                r = np.abs(pz[taken] - catenary(s[taken], sp.z0, sp.s0, sp.c))
+                better = r < best[taken]
+                best[taken[better]] = r[better]
+                line_of[taken[better]], wire_of[taken[better]] = li, sp.wire
+    return line_of, wire_of
+
+
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
     """Per point (``s`` along a line, ``off`` across it, height ``z``): the residual to the
     nearest of the line's ``spans`` it lies on - within the span's extent (± ``margin_m``),

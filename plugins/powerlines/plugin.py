@@ -18,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import local_surface_density, points_on_spans, shape_classes
+    from .core import grow_span_ends, local_surface_density, points_on_spans, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -101,6 +101,25 @@ def _run(inputs, params, ctx):
         keep = np.r_[keep, more[on]]
         line_of, wire_of_pt = np.r_[line_of, m_line[on]], np.r_[wire_of_pt, m_wire[on]]
 
+    # a span's catenary continued past its ends picks up its wire where the candidates stopped
+    # (under the height window on a slope; next to a tower, where the shape test sees the structure)
+    grown = np.zeros(0, np.int64)
+    if params["grow_spans"]:
+        t = time.perf_counter()
+        low = off[hag[off] >= 1.0]
+        g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
+                                        ~np.isin(low, keep[line_of >= 0]), params["max_rms_3d_m"],
+                                        max_gap_m=params["v_max_m"], reach_m=2 * params["s_min_m"])
+        on = g_line >= 0
+        grown = low[on]
+        # candidates on no wire yet are relabelled in place, the rest appended
+        pos = {int(k): n for n, k in enumerate(keep)}
+        at = np.array([pos.get(int(k), -1) for k in grown], np.int64)
+        line_of[at[at >= 0]], wire_of_pt[at[at >= 0]] = g_line[on][at >= 0], g_wire[on][at >= 0]
+        keep = np.r_[keep, grown[at < 0]]
+        line_of, wire_of_pt = np.r_[line_of, g_line[on][at < 0]], np.r_[wire_of_pt, g_wire[on][at < 0]]
+        timings["grow_spans_s"] = time.perf_counter() - t
+
     # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
     # volume, points of a crown that line up
     t = time.perf_counter()
@@ -124,6 +143,17 @@ def _run(inputs, params, ctx):
         conductor_of[keep] = line_of
         pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu,
                                           dtm, params)
+    if len(grown) and found:
+        # a wire continued across a tower's footprint is the tower's (the producer's convention
+        # on AHN4: the wire between the arms is class 15)
+        from .core import pylon_points
+
+        on_tower = np.zeros(len(grown), bool)
+        for p in found:
+            on_tower |= pylon_points(p, pc.x[grown] * hu, pc.y[grown] * hu)
+        gone = grown[on_tower & (conductor_of[grown] >= 0)]
+        conductor_of[gone] = -1
+        tower_pt[gone] = True
     timings["pylons_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
@@ -175,6 +205,7 @@ def _run(inputs, params, ctx):
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
+             "n_grown_points": int((conductor_of[grown] >= 0).sum()),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
@@ -591,7 +622,9 @@ def toolbox_algorithms():
             "into it; crossings between lines of the two passes are not computed), and what is still left for "
             "straight 3D runs of S_min / 2 (short_wires: a mobile scan's wires across the street, fanning from "
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
-            "cross-section; n_short_wires); a conductor must stand out in its cross-section (not a roof's scan row or "
+            "cross-section; n_short_wires); each span's catenary continued past its ends takes the wire where the "
+            "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), the wire "
+            "across a found tower's footprint being the tower's; a conductor must stand out in its cross-section (not a roof's scan row or "
             "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
@@ -646,6 +679,9 @@ def toolbox_algorithms():
             Parameter("short_wires", bool, True, "search what is left for straight 3D runs of wire-like points "
                       "S_min / 2 long: wires seen over a few metres only (a mobile scan's wires across the street) "
                       "that the 2D Hough's S_min misses"),
+            Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
+                      "points on it (within 0.25 m in plan and the fit's tolerance, no gap over v_max_m, up to "
+                      "2 x s_min_m): a wire under the height window or next to a tower"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
