@@ -501,6 +501,12 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
             tp = int((t_cls & pred).sum())
             row["wire_precision"] = round(tp / max(int(pred.sum()), 1), 3)
             row["wire_recall"] = round(tp / int(t_cls.sum()), 3)
+        t_tow = np.asarray(laspy.read(p).classification) == 15
+        if t_tow.any() and "n_towers_truth" not in row:  # AHN4's towers; CMU's poles and arms
+            pred = np.asarray(laspy.read(tmp / "pl_wires.laz").classification) == 15
+            tp = int((t_tow & pred).sum())
+            row["tower_point_precision"] = round(tp / max(int(pred.sum()), 1), 3)
+            row["tower_point_recall"] = round(tp / int(t_tow.sum()), 3)
         row["cell_size_m_used"] = rep["stats"].get("cell_size_m_used")
         print_row(row)
         found = f"{row['n_conductors']}"
@@ -509,6 +515,8 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
                      f"crossings {row['n_crossings_5cm']}/{row['n_crossings_truth']} within 5 cm, "
                      f"towers {row['n_towers_2m']}/{row['n_towers_truth']} within 2 m, {row['n_towers_false']} false")
         pr = f"; wire points P {row['wire_precision']:.3f} R {row['wire_recall']:.3f}" if "wire_recall" in row else ""
+        if "tower_point_recall" in row:
+            pr += f"; tower points (class 15) P {row['tower_point_precision']:.3f} R {row['tower_point_recall']:.3f}"
         print(f"  {row['s_per_million']:.2f} s per million points warm, {row['cli_s_per_million']:.2f} from the command "
               f"line in a fresh process; conductors {found}{pr}; stages: {row['stages_s']}")
         rows.append(row)

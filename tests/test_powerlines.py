@@ -686,6 +686,41 @@ def test_a_span_records_how_thin_its_points_are_across_the_line():
     assert wide.offset_rms > WIRE_LATERAL_RMS_M
 
 
+def test_foliage_on_a_wires_catenary_is_not_wire_its_own_scatter_is():
+    """A wire through a crown: the crown's points within the catenary's height tolerance are
+    linked to its piece. The span's plan trend and lateral tolerance come from the points on the
+    catenary, robustly (the foliage neither pulls nor widens them), and a point farther across
+    than that with other points off the ground around it is foliage; a wire point as far off with
+    nothing around it (a swinging span's tail) stays wire."""
+    from toolbox_plugins.powerlines.core import WIRE_LATERAL_FLOOR_M, _span, off_their_spans
+
+    rng = np.random.default_rng(7)
+    s_w = np.sort(rng.uniform(0, 60, 600))
+    off_w = 0.1 + rng.normal(0, 0.02, len(s_w))
+    z_w = catenary(s_w, 10.0, 30.0, 600.0) + rng.normal(0, 0.02, len(s_w))
+    # a crown's branch over 10-13 m along the line: 1.2 m across, 0.6 m in height about the wire
+    crown = rng.uniform([10.0, -0.5, -0.3], [13.0, 0.7, 0.3], (300, 3))
+    crown[:, 2] += catenary(crown[:, 0], 10.0, 30.0, 600.0)
+    s, off, z = np.r_[s_w, crown[:, 0]], np.r_[off_w, crown[:, 1]], np.r_[z_w, crown[:, 2]]
+    sp = _span(0, 0, 0, s, off, fit_catenary(s, z), z=z)
+    assert sp.offset == pytest.approx(0.1, abs=0.02) and sp.offset_slope == pytest.approx(0.0, abs=0.002)
+    assert WIRE_LATERAL_FLOOR_M <= sp.lateral_tol <= 0.1  # 3 robust sigma of 2 cm, not the crown's spread
+    near = np.abs(z - catenary(s, sp.z0, sp.s0, sp.c)) <= 0.15  # what the 3D step labels wire
+    tail = np.array([[40.0, 0.1 + 0.3, catenary(np.array([40.0]), 10.0, 30.0, 600.0)[0]]])  # alone, 0.3 m off
+    lab = np.flatnonzero(near)
+    px, py = np.r_[s[lab], tail[:, 0]], np.r_[off[lab], tail[:, 1]]  # the line's frame: x along, y across
+    pz = np.r_[z[lab], tail[:, 2]]
+    lines = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 60.0)]
+    ones = np.zeros(len(px), np.int64)
+    clutter = np.column_stack([s, off, z])[~near]  # the crown's points the 3D step left alone
+    flagged = off_their_spans([sp], lines, px, py, pz, ones, ones, 0.2, clutter_xyz=clutter)
+    is_crown = np.r_[lab >= len(s_w), False]
+    far = np.abs(py - 0.1) > 0.15
+    assert flagged[is_crown & far].mean() >= 0.95  # foliage aside the wire
+    assert not flagged[~is_crown].any()  # every wire point stays, the lone tail included
+    assert off_their_spans([sp], lines, px, py, pz, ones, ones, 0.2, clutter_xyz=np.zeros((0, 3)))[is_crown].sum() == 0
+
+
 def test_a_second_pass_line_along_a_found_one_is_not_another_conductor():
     from toolbox_plugins.powerlines.plugin import _along
 
@@ -1057,19 +1092,20 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.9, 0.75), ("part3_ak", 0.97, 0.9),
-                                                              ("part2_ai", 0.7, 0.79)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.93, 0.75), ("part3_ak", 0.97, 0.9),
+                                                              ("part2_ai", 0.8, 0.79)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors under what is reached, not the issue's
-    0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.917 / R 0.757
+    0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.936 / R 0.755
     (R 0.306 before the catenary peel, 0.623 before the second pass, 0.712 before the short
     wires across the street, 0.732 before spans grew past their ends; 2-4 m pieces of those
     are still missed); part3_ak, wires seen for
     5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top edge was taken for a wire);
-    part2_ai: 0.718 / 0.802 (R 0.704 before the short wires; the sparse upper wire among crowns
-    is missed; 126 of the 161 points counted false are crown points around the lower wire where
-    it runs through crowns, median 0.17 m from the fitted wire)."""
+    part2_ai: 0.805 / 0.802 (R 0.704 before the short wires; the sparse upper wire among crowns
+    is missed; P 0.718 while crown points around the lower wire, on its catenary in height but
+    0.1-0.4 m across it among more foliage, were taken; about 100 crown points within 0.1 m of
+    it are still counted false)."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14

@@ -243,6 +243,9 @@ def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
 # a wire is thin across its line: its points' lateral rms about a straight plan trend (ALS and
 # mobile scans alike: 0.04-0.1 m; a crown's edge lined up along a street is wider)
 WIRE_LATERAL_RMS_M = 0.15
+# the least lateral tolerance of a wire's points about its trend, whatever their measured
+# scatter: a few centimetres of ranging noise on either side
+WIRE_LATERAL_FLOOR_M = 0.05
 
 
 @dataclass
@@ -261,6 +264,7 @@ class Span:
     offset: float = 0.0  # the wire's lateral offset from the 2D line at s = 0 (side-by-side conductors)
     offset_slope: float = 0.0  # its change per unit along the line (wires not quite parallel to it)
     offset_rms: float = 0.0  # its points' lateral scatter about that straight trend (a wire is thin)
+    lateral_tol: float = np.inf  # how far across from that trend a point of this wire lies (3 robust sigma)
 
 
 def line_fit(x, y) -> tuple[float, float]:
@@ -505,7 +509,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             n_spans = [0]
 
             def emit(sel, wire, fit):
-                spans.append(_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit))
+                spans.append(_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit, z=zk[sel]))
                 n_spans[0] += 1
                 z0, s0, c, rms = fit
                 if rms <= max_rms:  # points of a span that is not a wire are not wire points
@@ -557,7 +561,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
                                              gap_m=2 * s_link):
                 sel = free[part]
-                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit))
+                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
                 line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
                 next_wire += 1
                 good.append(spans[-1])
@@ -565,9 +569,13 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     return spans, line_of, wire_of_point
 
 
-def _span(line: int, wire: int, number: int, s, off, fit) -> Span:
+def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
     """The Span of a catenary ``fit`` (z0, s0, c, rms) to points at ``s`` along the line and
-    ``off`` across it: its extent, sag below the chord and plan position (a straight trend)."""
+    ``off`` across it: its extent, sag below the chord and plan position (a straight trend).
+
+    With the points' heights ``z``, the plan trend and the lateral tolerance come from the points
+    on the catenary (within its fit tolerance) alone: foliage the wire runs through, linked to its
+    piece, scatters across it and must neither pull the trend nor widen what is taken as wire."""
     z0, s0, c, rms = fit
     a, b = float(s.min()), float(s.max())
     ss = np.linspace(a, b, 200)
@@ -575,7 +583,19 @@ def _span(line: int, wire: int, number: int, s, off, fit) -> Span:
     sag = float(np.max(chord - catenary(ss, z0, s0, c)))
     o1, o0 = line_fit(s, off) if len(s) >= 3 else (0.0, float(np.median(off)))
     o_rms = float(np.sqrt(np.mean((off - o1 * s - o0) ** 2)))
-    return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms)
+    lateral_tol = np.inf
+    if z is not None:
+        dz = z - catenary(s, z0, s0, c)
+        on = np.abs(dz) <= max(3 * rms, 0.15)
+        if on.sum() >= 3:
+            o1, o0 = line_fit(s[on], off[on])
+            for refit in (True, True, False):  # the trend refitted to the points within 3 robust sigma of it
+                r = np.abs(off[on] - o1 * s[on] - o0)
+                lateral_tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
+                core_ = np.flatnonzero(on)[r <= lateral_tol]
+                if refit and len(core_) >= 3:
+                    o1, o0 = line_fit(s[core_], off[core_])
+    return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms, lateral_tol)
 
 
 def span_in_frame(sp: Span, line_from, line_to, conductor: int, wire: int) -> Span:
@@ -988,6 +1008,48 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
                 best[taken[better]] = r[better]
                 line_of[taken[better]], wire_of[taken[better]] = li, sp.wire
     return line_of, wire_of
+
+
+def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, clutter_xyz=None,
+                    clutter_m: float = 0.3, margin_m: float = 0.5) -> np.ndarray:
+    """Per wire point (``line_of``, ``wire_of`` its conductor and wire; -1: none): whether it lies
+    farther across from the plan trend of its wire's span than that span's lateral tolerance (the
+    span at its position, within ``margin_m`` of its extent, with the least height residual) and,
+    with ``clutter_xyz`` (the points off the ground on no wire), has one of those within
+    ``clutter_m``. Foliage the wire runs through lies on its catenary in height but scattered
+    across it, among more foliage; a wire point off the trend with nothing around it is the
+    tail of the wire's own scatter (a long span swings in the wind). A point on no span of its
+    wire (a short wire's) is kept. ``lines`` as for conductors_3d."""
+    off_trend = np.zeros(len(px), bool)
+    for li in np.unique(line_of[line_of >= 0]):
+        anchor, direction, _, _ = lines[li]
+        for wire in np.unique(wire_of[line_of == li]):
+            wire_spans = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms <= max_rms
+                          and np.isfinite(sp.lateral_tol)]
+            if not wire_spans:
+                continue
+            m = np.flatnonzero((line_of == li) & (wire_of == wire))
+            dx, dy = px[m] - anchor[0], py[m] - anchor[1]
+            s, off = dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0]
+            best = np.full(len(m), np.inf)
+            far = np.zeros(len(m), bool)
+            for sp in wire_spans:
+                at = (s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m)
+                r = np.where(at, np.abs(pz[m] - catenary(s, sp.z0, sp.s0, sp.c)), np.inf)
+                nearer = r < best
+                best[nearer] = r[nearer]
+                far[nearer] = np.abs(off[nearer] - sp.offset - sp.offset_slope * s[nearer]) > sp.lateral_tol
+            off_trend[m[far]] = True
+    if clutter_xyz is not None and off_trend.any():
+        from scipy.spatial import cKDTree
+
+        k = np.flatnonzero(off_trend)
+        if len(clutter_xyz):
+            d = cKDTree(clutter_xyz).query(np.column_stack([px[k], py[k], pz[k]]), distance_upper_bound=clutter_m)[0]
+            off_trend[k[~np.isfinite(d)]] = False
+        else:
+            off_trend[k] = False
+    return off_trend
 
 
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):

@@ -18,7 +18,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import grow_span_ends, local_surface_density, points_on_spans, shape_classes
+    from .core import grow_span_ends, local_surface_density, off_their_spans, points_on_spans, shape_classes
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -156,6 +156,18 @@ def _run(inputs, params, ctx):
         tower_pt[gone] = True
     timings["pylons_s"] = time.perf_counter() - t
 
+    # a wire's points lie on its plan trend; the foliage it runs through, on its catenary in height,
+    # scatters across it
+    wire_pt = np.flatnonzero(conductor_of >= 0)
+    wire_of_input = np.full(len(pc), -1)
+    wire_of_input[keep] = wire_of_pt
+    clutter = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0))
+    off_trend = wire_pt[off_their_spans(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
+                                        conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
+                                        clutter_xyz=np.column_stack([pc.x[clutter] * hu, pc.y[clutter] * hu,
+                                                                     pc.z[clutter] * vu]))]
+    conductor_of[off_trend] = -1
+
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
@@ -205,7 +217,7 @@ def _run(inputs, params, ctx):
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
-             "n_grown_points": int((conductor_of[grown] >= 0).sum()),
+             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
@@ -624,7 +636,9 @@ def toolbox_algorithms():
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
             "cross-section; n_short_wires); each span's catenary continued past its ends takes the wire where the "
             "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), the wire "
-            "across a found tower's footprint being the tower's; a conductor must stand out in its cross-section (not a roof's scan row or "
+            "across a found tower's footprint being the tower's; a wire point farther across its span's plan trend "
+            "than 3 robust sigma (at least 0.05 m) with other points off the ground within 0.3 m is foliage the "
+            "wire runs through (n_off_trend_points); a conductor must stand out in its cross-section (not a roof's scan row or "
             "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
