@@ -179,6 +179,9 @@ def _run(inputs, params, ctx):
                        n_wires=[len(np.unique(wire_of_pt[line_of == li])) for li in range(len(cond))])
     import geopandas as gpd
 
+    # a piece no catenary fits (a crown the wire runs through) is no span of a wire: its points are
+    # not wire points, and it is not drawn
+    spans = [sp for sp in spans if sp.rms <= params["max_rms_3d_m"]]
     rows, geoms = [], []
     for sp in spans:
         a, dvec, _, _ = geo[sp.conductor]
