@@ -936,6 +936,16 @@ def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0
     return False
 
 
+def _spans_by_line(spans, lines, px, py, max_rms: float):
+    """Per conductor holding a span that fits (rms <= ``max_rms``): (its index, those spans, the
+    points' positions ``s`` along it and ``off`` across it). ``lines`` as for conductors_3d."""
+    for li in sorted({sp.conductor for sp in spans if sp.rms <= max_rms}):
+        anchor, direction, _, _ = lines[li]
+        dx, dy = px - anchor[0], py - anchor[1]
+        yield (li, [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms],
+               dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0])
+
+
 def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
     """For points outside the 3D step (the candidates the shape test left out: a wire's points
     next to a pole top, whose neighbourhood leans on the pole), the conductor and wire of the
@@ -944,12 +954,8 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
-    for li in sorted({sp.conductor for sp in spans if sp.rms <= max_rms}):
-        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
-        anchor, direction, _, _ = lines[li]
-        dx, dy = px - anchor[0], py - anchor[1]
-        r, k = _on_spans(dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0], pz,
-                         line_spans, lateral_m, margin_m=0.0)
+    for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
+        r, k = _on_spans(s, off, pz, line_spans, lateral_m, margin_m=0.0)
         hit = np.flatnonzero((k >= 0) & (r < best))
         best[hit], line_of[hit] = r[hit], li
         wire_of[hit] = [line_spans[j].wire for j in k[hit]]
@@ -972,12 +978,7 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
-    for li in sorted({sp.conductor for sp in spans if sp.rms <= max_rms}):
-        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
-        anchor, direction, _, _ = lines[li]
-        dx, dy = px - anchor[0], py - anchor[1]
-        s = dx * direction[0] + dy * direction[1]
-        off = -dx * direction[1] + dy * direction[0]
+    for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
         for sp in line_spans:
             tol = max(3 * sp.rms, 0.15)
             for end, sign in ((sp.s_to, 1.0), (sp.s_from, -1.0)):
