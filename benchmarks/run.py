@@ -495,15 +495,17 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
         truth = p.with_name(p.stem + "_truth.json")
         if truth.exists():  # synthetic scenes: conductors, crossings and towers against the truth
             row.update(_score_corridor(json.loads(truth.read_text()), tmp / "pl.gpkg"))
-        t_cls = np.asarray(laspy.read(p).classification) == 14
+        t_all = np.asarray(laspy.read(p).classification)
+        p_all = np.asarray(laspy.read(tmp / "pl_wires.laz").classification)
+        t_cls = t_all == 14
         if t_cls.any():  # wire points against class 14 (the scene's truth, AHN4's producer, CMU's labels)
-            pred = np.asarray(laspy.read(tmp / "pl_wires.laz").classification) == 14
+            pred = p_all == 14
             tp = int((t_cls & pred).sum())
             row["wire_precision"] = round(tp / max(int(pred.sum()), 1), 3)
             row["wire_recall"] = round(tp / int(t_cls.sum()), 3)
-        t_tow = np.asarray(laspy.read(p).classification) == 15
+        t_tow = t_all == 15
         if t_tow.any() and "n_towers_truth" not in row:  # AHN4's towers; CMU's poles and arms
-            pred = np.asarray(laspy.read(tmp / "pl_wires.laz").classification) == 15
+            pred = p_all == 15
             tp = int((t_tow & pred).sum())
             row["tower_point_precision"] = round(tp / max(int(pred.sum()), 1), 3)
             row["tower_point_recall"] = round(tp / int(t_tow.sum()), 3)

@@ -592,9 +592,9 @@ def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
             for refit in (True, True, False):  # the trend refitted to the points within 3 robust sigma of it
                 r = np.abs(off[on] - o1 * s[on] - o0)
                 lateral_tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
-                core_ = np.flatnonzero(on)[r <= lateral_tol]
-                if refit and len(core_) >= 3:
-                    o1, o0 = line_fit(s[core_], off[core_])
+                within = np.flatnonzero(on)[r <= lateral_tol]
+                if refit and len(within) >= 3:
+                    o1, o0 = line_fit(s[within], off[within])
     return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms, lateral_tol)
 
 

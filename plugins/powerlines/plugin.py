@@ -113,8 +113,9 @@ def _run(inputs, params, ctx):
         on = g_line >= 0
         grown = low[on]
         # candidates on no wire yet are relabelled in place, the rest appended
-        pos = {int(k): n for n, k in enumerate(keep)}
-        at = np.array([pos.get(int(k), -1) for k in grown], np.int64)
+        pos = np.full(len(pc), -1, np.int64)
+        pos[keep] = np.arange(len(keep))
+        at = pos[grown]
         line_of[at[at >= 0]], wire_of_pt[at[at >= 0]] = g_line[on][at >= 0], g_wire[on][at >= 0]
         keep = np.r_[keep, grown[at < 0]]
         line_of, wire_of_pt = np.r_[line_of, g_line[on][at < 0]], np.r_[wire_of_pt, g_wire[on][at < 0]]
@@ -158,6 +159,7 @@ def _run(inputs, params, ctx):
 
     # a wire's points lie on its plan trend; the foliage it runs through, on its catenary in height,
     # scatters across it
+    t = time.perf_counter()
     wire_pt = np.flatnonzero(conductor_of >= 0)
     wire_of_input = np.full(len(pc), -1)
     wire_of_input[keep] = wire_of_pt
@@ -167,6 +169,7 @@ def _run(inputs, params, ctx):
                                         clutter_xyz=np.column_stack([pc.x[clutter] * hu, pc.y[clutter] * hu,
                                                                      pc.z[clutter] * vu]))]
     conductor_of[off_trend] = -1
+    timings["off_trend_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
