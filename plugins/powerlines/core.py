@@ -946,6 +946,22 @@ def _spans_by_line(spans, lines, px, py, max_rms: float):
                dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0])
 
 
+def wire_point_spacing(spans, lines, px, py, line_of, wire_of, max_rms: float, max_gap_m: float) -> float | None:
+    """The median distance along the wire between consecutive points of the fitted spans that fit
+    (rms <= ``max_rms``), leaving out the gaps over ``max_gap_m`` between their pieces: how densely
+    the survey samples its wires. ``p*``: the points, ``line_of``/``wire_of`` their conductor and
+    wire (-1: none); None where no span fits."""
+    gaps = []
+    for li, line_spans, s, _ in _spans_by_line(spans, lines, px, py, max_rms):
+        on_line = line_of == li
+        for sp in line_spans:
+            ss = np.sort(s[on_line & (wire_of == sp.wire) & (s >= sp.s_from) & (s <= sp.s_to)])
+            g = np.diff(ss)
+            gaps.append(g[g <= max_gap_m])
+    gaps = np.concatenate(gaps) if gaps else np.zeros(0)
+    return float(np.median(gaps)) if len(gaps) >= 20 else None
+
+
 def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
     """For points outside the 3D step (the candidates the shape test left out: a wire's points
     next to a pole top, whose neighbourhood leans on the pole), the conductor and wire of the
@@ -988,12 +1004,15 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
                 zone, lat = zone[lat <= lateral_m + column_m], lat[lat <= lateral_m + column_m]
                 dz = pz[zone] - catenary(s[zone], sp.z0, sp.s0, sp.c)
                 on = (lat <= lateral_m) & (np.abs(dz) <= tol)
-                cand = np.flatnonzero(on & free[zone] & (out[zone] > 0))
+                # the gaps along the wire count its points on a wire already too (another span's,
+                # a candidate's), then the free ones up to the first gap are taken
+                ahead = np.flatnonzero(on & (out[zone] > 0))
+                ahead = ahead[np.argsort(out[zone[ahead]])]
+                steps = np.diff(np.r_[0.0, out[zone[ahead]]])
+                ahead = ahead[: int(np.argmax(np.r_[steps, np.inf] > max_gap_m))]
+                cand = ahead[free[zone[ahead]]]
                 if not len(cand):
                     continue
-                cand = cand[np.argsort(out[zone[cand]])]
-                steps = np.diff(np.r_[0.0, out[zone[cand]]])
-                cand = cand[: int(np.argmax(np.r_[steps, np.inf] > max_gap_m))]
                 tree = cKDTree(np.column_stack([s[zone], off[zone]]))
                 taken = []
                 for k, nb in zip(cand, tree.query_ball_point(np.column_stack([s[zone[cand]], off[zone[cand]]]),

@@ -7,6 +7,12 @@ from __future__ import annotations
 import toolbox
 from toolbox import Algorithm, DataError, Input, LayerMerge, Output, Parameter
 
+# the method's V_max, and how many median point spacings along a wire a gap may span before it
+# ends a run: 2.5 m is about 10 spacings on 10 pts/m2 ALS (and 36 on the method's 228 pts/m2), so
+# surveys as dense or denser keep the method's value and sparser ones scale it
+V_MAX_METHOD_M = 2.5
+GAP_SPACINGS = 10.0
+
 REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
 
@@ -18,7 +24,8 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import grow_span_ends, local_surface_density, off_their_spans, points_on_spans, shape_classes
+    from .core import (grow_span_ends, local_surface_density, off_their_spans, points_on_spans, shape_classes,
+                       wire_point_spacing)
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -66,7 +73,18 @@ def _run(inputs, params, ctx):
     # separate cells with an empty one between them, or the opening keeps their band and the
     # top-hat throws the wires away (AHN4's side-by-side conductors at the method's 0.5 m)
     cell_used = params["cell_size_m"] if params["cell_size_m"] is not None else round(params["band_m"] / 3, 3)
+    v_max_auto = params["v_max_m"] is None
+    params = dict(params, v_max_m=V_MAX_METHOD_M if v_max_auto else params["v_max_m"])
     lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings)
+    spacing = wire_point_spacing(spans, geo, pc.x[keep] * hu, pc.y[keep] * hu, line_of, wire_of_pt,
+                                 params["max_rms_3d_m"], 2 * params["v_max_m"])
+    if v_max_auto and spacing is not None and GAP_SPACINGS * spacing > params["v_max_m"]:
+        # a sparser survey than the method's samples its wires with gaps over V_max every few
+        # spans, and each such gap cuts a run: the gap allowed scales with the measured spacing
+        params["v_max_m"] = round(GAP_SPACINGS * spacing, 2)
+        lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx,
+                                                                        timings)
+    lines, geo, spans, line_of, wire_of_pt = _fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params)
     free = keep[line_of < 0]
     if params["second_pass"] and len(free) >= 100:
         # the wire-like points on no wire, searched again: a stretch past a bend in the line whose
@@ -109,7 +127,7 @@ def _run(inputs, params, ctx):
         low = off[hag[off] >= 1.0]
         g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
                                         ~np.isin(low, keep[line_of >= 0]), params["max_rms_3d_m"],
-                                        max_gap_m=params["v_max_m"], reach_m=2 * params["s_min_m"])
+                                        max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"])
         on = g_line >= 0
         grown = low[on]
         # candidates on no wire yet are relabelled in place, the rest appended
@@ -221,7 +239,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
@@ -304,6 +322,30 @@ def _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params):
         wire_of_pt[pos[mine]] = wire2[mine]
         lines = _append_conductors(lines, lines2, n0)
     return lines, geo, spans
+
+
+def _fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params):
+    """A line at most half as long as another that it runs along (``_along``) is a stretch of
+    that conductor the Hough fitted on its own (a sub-conductor of a bundle near a tower, a
+    stretch past a gap), not another one: folded into it as ``_add_pass`` folds a further pass's
+    lines. Returns (lines, geo, spans, line_of, wire_of_pt)."""
+    import dataclasses
+
+    import numpy as np
+
+    length = [t1 - t0 for (_, _, t0, t1) in geo]
+    stubs = [i for i, g in enumerate(geo)
+             if any(j != i and length[j] >= 2 * length[i] and _along(g, h, params["band_m"]) for j, h in enumerate(geo))]
+    if not stubs:
+        return lines, geo, spans, line_of, wire_of_pt
+    # (_keep_conductors renumbers the spans in place: the stubs' selection works on copies)
+    sub = _keep_conductors(stubs, lines, geo, [dataclasses.replace(sp) for sp in spans], line_of, wire_of_pt)
+    lines, geo, spans, line_of, wire_of_pt = _keep_conductors([i for i in range(len(geo)) if i not in stubs], lines,
+                                                              geo, spans, line_of, wire_of_pt)
+    pos = np.flatnonzero(line_of < 0)
+    lines, geo, spans = _add_pass((*sub[:3], sub[3][pos], sub[4][pos], 0), lines, geo, spans, line_of, wire_of_pt,
+                                  hu, params)
+    return lines, geo, spans, line_of, wire_of_pt
 
 
 def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
@@ -634,7 +676,10 @@ def toolbox_algorithms():
             "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
             "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart; "
-            "pieces between cuts or occlusions from S_min / 2); a conductor holds a span of S_min that fits, hangs "
+            "pieces between cuts or occlusions from S_min / 2); V_max is the method's 2.5 m unless a first pass "
+            "finds the wires sampled sparser than 10 points per 2.5 m, then 10 x their median point spacing "
+            "(v_max_m_used, wire_spacing_m); a short first-pass line along a line twice its length is folded "
+            "into it; a conductor holds a span of S_min that fits, hangs "
             "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
             "searched once more (second_pass: a line's stretch past a bend; a line along one found already is folded "
             "into it; crossings between lines of the two passes are not computed), and what is still left for "
@@ -683,7 +728,9 @@ def toolbox_algorithms():
                       minimum=0.0, maximum=50.0),
             Parameter("min_votes", int, 15, "stop below this many votes", unit="votes", minimum=2),
             Parameter("s_min_m", float, 8.0, "S_min: shortest run of a conductor", unit="m", minimum=0.0),
-            Parameter("v_max_m", float, 2.5, "V_max: largest gap within a run", unit="m", minimum=0.01),
+            Parameter("v_max_m", float, None, "V_max: largest gap within a run; auto: the method's 2.5 m, or on "
+                      "sparser surveys 10 x the median spacing of points along the wires a first pass finds "
+                      "(v_max_m_used, wire_spacing_m)", unit="m", minimum=0.01, maximum=1000.0, allow_auto=True),
             Parameter("tile_size_m", float, 100.0, "Hough tile size", unit="m", minimum=0.0, maximum=100000.0),
             Parameter("overlap_m", float, 10.0, "tile overlap", unit="m", minimum=0.0, maximum=1000.0),
             Parameter("merge_gap_m", float, 100.0, "collinear pieces this close are one conductor", unit="m",
@@ -700,7 +747,7 @@ def toolbox_algorithms():
                       "S_min / 2 long: wires seen over a few metres only (a mobile scan's wires across the street) "
                       "that the 2D Hough's S_min misses"),
             Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
-                      "points on it (within 0.25 m in plan and the fit's tolerance, no gap over v_max_m, up to "
+                      "points on it (within 0.25 m in plan and the fit's tolerance, no gap over 2 x v_max_m, up to "
                       "2 x s_min_m): a wire under the height window or next to a tower"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
