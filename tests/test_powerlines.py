@@ -1115,6 +1115,24 @@ def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= min_recall
 
 
+def test_crossings_are_computed_over_the_conductors_of_every_pass(tmp_path):
+    """A distribution line seen by a mobile scanner 12 m aside (seed 3): one wire of the line
+    across it is found only by the second pass (12 m of it in plan); its crossings with the three
+    phases are crossings too (3 of 6 while crossings came from the first pass's Hough alone)."""
+    path = tmp_path / "m.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", seed=3,
+                scanner="mobile", density_ppm2=100.0, width_m=300.0, height_m=120.0, track_offset_m=12.0)
+    truth = json.loads(path.with_name("m_truth.json").read_text())
+    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg")
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = conductor_hits(cond, truth)
+    assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"])))
+    assert len(cond) == len({i for _, i in hits})
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    assert len(cr) == len(truth["crossings"]) == 6 == rep["stats"]["n_crossings"]
+    assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
+
+
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")

@@ -220,8 +220,9 @@ def _run(inputs, params, ctx):
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
+    crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
-              "crossings": lines["crossings"], "conductors_3d": c3d, "pylons": pylons}
+              "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
     if ctx.wants("classified"):
         cls = np.asarray(ground_cls).copy()
@@ -240,7 +241,7 @@ def _run(inputs, params, ctx):
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
-             "n_spans": len(spans), "n_crossings": len(lines["crossings"]), "n_wire_points": int((conductor_of >= 0).sum()),
+             "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
              "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
@@ -584,22 +585,16 @@ def _along(g, h, band_m: float, max_angle_deg: float = 1.0) -> bool:
 
 
 def _append_conductors(lines: dict, more: dict, n0: int) -> dict:
-    """The layers of a second Hough pass appended to the first's, its conductors numbered from ``n0``."""
+    """The layers of a second Hough pass appended to the first's, its conductors numbered from
+    ``n0`` (crossings are computed once, over the final conductors)."""
     import pandas as pd
 
-    out = {}
+    out = dict(lines)
     for name in ("conductors", "conductor_segments"):
         add = more[name].assign(conductor=more[name]["conductor"] + n0)
         g = pd.concat([lines[name], add], ignore_index=True)
         g.attrs.update(lines[name].attrs)
         out[name] = g
-    cr = more["crossings"]
-    if len(cr):
-        cr = cr.assign(conductors=[",".join(str(i + n0) for i in row) for row in _crossing_ids(cr)])
-        out["crossings"] = pd.concat([lines["crossings"], cr], ignore_index=True)
-        out["crossings"].attrs.update(lines["crossings"].attrs)
-    else:
-        out["crossings"] = lines["crossings"]
     return out
 
 
@@ -619,27 +614,47 @@ def _keep_conductors(keep_lines, lines, geo, spans, line_of, wire_of_pt):
 
 
 def _select_conductors(lines: dict, keep: list) -> dict:
-    """Keep the given conductors (renumbered) with their segments and the crossings among them."""
+    """Keep the given conductors (renumbered) with their segments (crossings are computed once,
+    over the final conductors)."""
     cond = lines["conductors"]
     remap = {old: new for new, old in enumerate(keep)}
     new_cond = cond.iloc[keep].reset_index(drop=True).assign(conductor=list(range(len(keep))))
     seg = lines["conductor_segments"]
     seg = seg[seg["conductor"].isin(keep)].reset_index(drop=True)
     seg = seg.assign(conductor=[remap[c] for c in seg["conductor"]])
-    cr = lines["crossings"]
-    if len(cr):
-        ids = _crossing_ids(cr)
-        ok = [all(i in remap for i in row) for row in ids]
-        cr = cr[ok].reset_index(drop=True)
-        cr = cr.assign(conductors=[",".join(str(remap[i]) for i in row) for row, k in zip(ids, ok) if k])
-    for g, src in ((new_cond, cond), (seg, lines["conductor_segments"]), (cr, lines["crossings"])):
+    for g, src in ((new_cond, cond), (seg, lines["conductor_segments"])):
         g.attrs.update(src.attrs)
-    return {"conductors": new_cond, "conductor_segments": seg, "crossings": cr}
+    return {**lines, "conductors": new_cond, "conductor_segments": seg}
 
 
-def _crossing_ids(cr) -> list[list[int]]:
-    """The conductors of each crossing (the layer's comma-separated ``conductors`` field)."""
-    return [[int(v) for v in str(c).split(",") if v != ""] for c in cr["conductors"]]
+def _crossings_of(cond, segs, validation: str, hu: float):
+    """The ``crossings`` layer of the final conductors, whichever pass found them: pairs of plan
+    lines (``cond``) confirmed by their extents or (``segments``, the paper) by their validated
+    ``segs``, as the Hough confirms its own. A crossing the Hough merged with a line dropped
+    later (a tower member through the same point) is then still a crossing of the lines kept."""
+    import geopandas as gpd
+    import numpy as np
+    from shapely.geometry import Point
+
+    from toolbox.crossings import crossings
+
+    def ends(g):
+        return np.asarray(g.coords[0], float)[:2] * hu, np.asarray(g.coords[-1], float)[:2] * hu
+
+    lines, checks = [], []
+    for i, g in enumerate(cond.geometry):
+        a, b = ends(g)
+        lines.append((a, (b - a) / max(float(np.hypot(*(b - a))), 1e-12)))
+        checks.append([(a, b)] if validation == "extent" else
+                      [ends(s) for s in segs.geometry[(segs["conductor"] == i).to_numpy()]])
+    cross = crossings(lines, checks)
+    rows = [{"n_lines": k["n_lines"], "angle_deg": k["angle_deg"], "conductors": ",".join(map(str, k["lines"]))}
+            for k in cross]
+    geoms = gpd.GeoSeries([Point(k["x"] / hu, k["y"] / hu) for k in cross], crs=cond.crs)
+    out = gpd.GeoDataFrame(rows if rows else {"n_lines": [], "angle_deg": [], "conductors": []}, geometry=geoms,
+                           crs=cond.crs)
+    out.attrs["geometry_type"] = "Point"
+    return out
 
 
 def _tile_buffer_m(p) -> float:
@@ -673,7 +688,7 @@ def toolbox_algorithms():
         description=(
             "The method's chain: ground and height above ground (dtm), candidates by class, returns and a height "
             "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
-            "validation, SVD refit, crossings, merging across tiles; then the 3D step: the points near each 2D "
+            "validation, SVD refit, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
             "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart; "
             "pieces between cuts or occlusions from S_min / 2); V_max is the method's 2.5 m unless a first pass "
@@ -682,7 +697,7 @@ def toolbox_algorithms():
             "into it; a conductor holds a span of S_min that fits, hangs "
             "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
             "searched once more (second_pass: a line's stretch past a bend; a line along one found already is folded "
-            "into it; crossings between lines of the two passes are not computed), and what is still left for "
+            "into it), and what is still left for "
             "straight 3D runs of S_min / 2 (short_wires: a mobile scan's wires across the street, fanning from "
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
             "cross-section; n_short_wires); each span's catenary continued past its ends takes the wire where the "
@@ -694,8 +709,9 @@ def toolbox_algorithms():
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
             "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
-            "class 15 in the classified output). GeoPackage layers conductors, conductor_segments, crossings, "
-            "conductors_3d, pylons."),
+            "class 15 in the classified output); crossings over the final conductors, whichever pass found them "
+            "(confirmed by extents or segments as in the Hough). GeoPackage layers conductors, conductor_segments, "
+            "crossings, conductors_3d, pylons."),
         reference=REFERENCE,
         tile_buffer_m=_tile_buffer_m,
         parameters=[
