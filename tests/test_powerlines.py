@@ -12,6 +12,7 @@ import pytest
 import toolbox
 from conftest import shared_file
 from toolbox import kernels
+from toolbox.crossings import crossings
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
@@ -891,10 +892,10 @@ def test_crossings_average_only_where_lines_meet():
         return (p, d), [(p - 50 * d, p + 50 * d)]
 
     star = [line((0, 0), a) for a in (0, 40, 100)]
-    c = hough.crossings([l for l, _ in star], [s for _, s in star])
+    c = crossings([l for l, _ in star], [s for _, s in star])
     assert len(c) == 1 and c[0]["n_lines"] == 3 and np.hypot(c[0]["x"], c[0]["y"]) < 1e-9
     ribbon = [line((0, off), 0) for off in (-0.6, 0.0, 0.6)] + [line((0, 0), 35)]
-    c = hough.crossings([l for l, _ in ribbon], [s for _, s in ribbon])
+    c = crossings([l for l, _ in ribbon], [s for _, s in ribbon])
     assert len(c) == 3 and all(x["n_lines"] == 2 for x in c)
     assert sorted(round(x["y"], 6) for x in c) == [-0.6, 0.0, 0.6]
 

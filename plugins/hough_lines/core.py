@@ -15,8 +15,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from toolbox.crossings import crossings, intersect  # noqa: F401  (the method's §5, shared with powerlines)
-
 from .reference import bin_index, bin_scales
 
 

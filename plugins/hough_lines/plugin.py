@@ -64,7 +64,7 @@ def layers(conductors, x, y, crs, extra=None, validation: str = "extent"):
     import numpy as np
     from shapely.geometry import LineString, Point
 
-    from .core import crossings
+    from toolbox.crossings import crossings
 
     rows, geoms, srows, sgeoms = [], [], [], []
     for i, c in enumerate(conductors):

@@ -389,9 +389,7 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
                      "azimuth_deg": float(np.degrees(np.arctan2(d[0], d[1])) % 180.0), "geometry": g})
         segs.append({"conductor": li, "segment": 0, "length_m": L, "geometry": g})
     lines = {"conductors": gpd.GeoDataFrame(rows, geometry="geometry", crs=pc.crs),
-             "conductor_segments": gpd.GeoDataFrame(segs, geometry="geometry", crs=pc.crs),
-             "crossings": gpd.GeoDataFrame({"n_lines": [], "angle_deg": [], "conductors": []},
-                                           geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)}
+             "conductor_segments": gpd.GeoDataFrame(segs, geometry="geometry", crs=pc.crs)}
     return lines, geo, spans, line_of, np.where(line_of >= 0, 0, -1), 0
 
 
@@ -451,7 +449,9 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     t = time.perf_counter()
     hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
                                  "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
-    lines = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
+    # its crossings are numbered over lines the 3D step may drop: they are computed once at the end
+    found = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
+    lines = {k: found[k] for k in ("conductors", "conductor_segments")}
     timings["hough_s"] = timings.get("hough_s", 0.0) + time.perf_counter() - t
     # wires along each 2D line, split by height and continuity, a catenary per span
     t = time.perf_counter()
@@ -589,7 +589,7 @@ def _append_conductors(lines: dict, more: dict, n0: int) -> dict:
     ``n0`` (crossings are computed once, over the final conductors)."""
     import pandas as pd
 
-    out = dict(lines)
+    out = {}
     for name in ("conductors", "conductor_segments"):
         add = more[name].assign(conductor=more[name]["conductor"] + n0)
         g = pd.concat([lines[name], add], ignore_index=True)
@@ -624,7 +624,7 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     seg = seg.assign(conductor=[remap[c] for c in seg["conductor"]])
     for g, src in ((new_cond, cond), (seg, lines["conductor_segments"])):
         g.attrs.update(src.attrs)
-    return {**lines, "conductors": new_cond, "conductor_segments": seg}
+    return {"conductors": new_cond, "conductor_segments": seg}
 
 
 def _crossings_of(cond, segs, validation: str, hu: float):
