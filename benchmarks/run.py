@@ -515,6 +515,7 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
         if "n_conductors_truth" in row:
             found = (f"{row['n_conductors_found']}/{row['n_conductors_truth']} found, {row['n_conductors_false']} false, "
                      f"crossings {row['n_crossings_5cm']}/{row['n_crossings_truth']} within 5 cm, "
+                     f"{row['n_crossings_false']} false, "
                      f"towers {row['n_towers_2m']}/{row['n_towers_truth']} within 2 m, {row['n_towers_false']} false")
         pr = f"; wire points P {row['wire_precision']:.3f} R {row['wire_recall']:.3f}" if "wire_recall" in row else ""
         if "tower_point_recall" in row:
@@ -951,13 +952,14 @@ def _score_corridor(truth: dict, gpkg: Path) -> dict:
     crossings and towers by distance."""
     import geopandas as gpd
 
-    from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors
+    from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
 
     cond = gpd.read_file(gpkg, layer="conductors")
     hits = conductor_hits(cond, truth)
     matched, used = {k for k, _ in hits}, {i for _, i in hits}
     cr = gpd.read_file(gpkg, layer="crossings")
-    cr_err = crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]) if len(cr) else np.zeros((0, 2)), truth)
+    cr_xy = np.column_stack([cr.geometry.x, cr.geometry.y]) if len(cr) else np.zeros((0, 2))
+    cr_err = crossing_errors(cr_xy, truth)
     py = gpd.read_file(gpkg, layer="pylons")
     tow = [float(np.min(np.hypot(py.geometry.x - q["x"], py.geometry.y - q["y"]))) if len(py) else np.inf
            for q in truth["pylons"]]
@@ -965,7 +967,7 @@ def _score_corridor(truth: dict, gpkg: Path) -> dict:
                     for x, y in zip(py.geometry.x, py.geometry.y))
     return {"n_conductors_truth": len(truth["conductor_lines_2d"]), "n_conductors_found": len(matched),
             "n_conductors_false": len(cond) - len(used), "n_crossings_truth": len(cr_err),
-            "n_crossings_5cm": sum(e <= 0.05 for e in cr_err),
+            "n_crossings_5cm": sum(e <= 0.05 for e in cr_err), "n_crossings_false": false_crossings(cr_xy, truth),
             "crossing_err_max_m": round(max(cr_err), 3) if cr_err else None,
             "n_towers_truth": len(tow), "n_towers_2m": sum(d <= 2.0 for d in tow), "n_towers_false": int(false_tow)}
 

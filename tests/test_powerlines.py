@@ -19,7 +19,7 @@ from toolbox_plugins.hough_lines import reference
 from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, fit_catenary, line_fit,
                                              local_surface_density, parabola_fit, peel_catenaries, shape_classes,
                                              span_on_surface, split_spans)
-from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors
+from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
 
 
@@ -606,6 +606,46 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
     assert _arms(cond2, [], 1.0) == set()
 
 
+def _pole_points(rng, x, y, height_m, radius_m=0.15, per_m=60):
+    """A pole's surface as a street scanner sees it: the half facing the road, from 0.3 m up."""
+    n = int(height_m * per_m)
+    a = rng.uniform(0.0, np.pi, n)
+    h = rng.uniform(0.3, height_m, n)
+    return np.column_stack([x + radius_m * np.cos(a), y - radius_m * np.sin(a), h]) + rng.normal(0, 0.01, (n, 3))
+
+
+def test_poles_are_thin_columns_that_carry_the_wires():
+    """A 10.5 m pole with a crown against it from 4 to 8 m and wires at its top is a pole; a
+    tree (a 2.5 m trunk under its crown) and a 6 m street light under the same wires are not;
+    without wires nothing is."""
+    from toolbox_plugins.powerlines.core import find_poles
+
+    rng = np.random.default_rng(3)
+    pole = _pole_points(rng, 0.0, 0.0, 10.5)
+    crown_by_pole = rng.normal([1.8, 0.0, 6.0], [0.8, 0.8, 1.0], (3000, 3))
+    trunk = _pole_points(rng, 15.0, 0.5, 2.5, radius_m=0.2)
+    crown = rng.normal([15.0, 0.5, 5.5], [1.5, 1.5, 1.3], (6000, 3))
+    light = _pole_points(rng, -12.0, 0.8, 6.0, radius_m=0.08)
+    pts = np.vstack([pole, crown_by_pole[crown_by_pole[:, 2] > 1.0], trunk, crown[crown[:, 2] > 2.5], light])
+    s = np.arange(-30.0, 30.0, 0.1)
+    wire = np.column_stack([s, np.full_like(s, 0.4), 10.2 + 0.002 * s ** 2])
+    lines = [(np.array([-30.0, 0.4]), np.array([30.0, 0.4]))]
+    found = find_poles(pts[:, 0], pts[:, 1], pts[:, 2], wire[:, 0], wire[:, 1], wire[:, 2], [0.0], lines,
+                       span_ends=np.array([[0.0, 0.4]]))
+    assert len(found) == 1, [(p.x, p.y) for p in found]
+    p = found[0]
+    # the axis of the face the scanner sees: within the pole's radius (and a voxel) of its centre
+    assert p.kind == "pole" and np.hypot(p.x, p.y) <= 0.15 + 0.05 and p.height_m >= 10.2 and p.n_spans == 1
+    # its footprint holds its column and not the crown beside it
+    from toolbox_plugins.powerlines.core import pylon_points
+
+    inside = pylon_points(p, pts[:, 0], pts[:, 1])
+    assert inside[:len(pole)].mean() >= 0.99
+    assert np.hypot(pts[inside, 0] - p.x, pts[inside, 1] - p.y).max() <= 0.45 + 0.1
+    assert inside[len(pole):].sum() <= 0.1 * inside.sum()
+    assert find_poles(pts[:, 0], pts[:, 1], pts[:, 2], wire[:0, 0], wire[:0, 1], wire[:0, 2], [0.0], lines) == []
+
+
 def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):
     """A square bundle (four wires 0.6 m apart, ALS density) is volumetric in a 12-point
     neighbourhood; as a set it is a tube, so its points are wire candidates again. A crown
@@ -1110,7 +1150,8 @@ def test_corridor_variants_at_default_parameters(variant, extra, min_recall, tmp
     assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"])))
     assert len(cond) == len({i for _, i in hits})  # no false conductor
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
-    assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
+    cr_xy = np.column_stack([cr.geometry.x, cr.geometry.y])
+    assert max(crossing_errors(cr_xy, truth)) <= 0.05 and false_crossings(cr_xy, truth) == 0
     t14 = np.asarray(laspy.read(path).classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= min_recall
@@ -1132,6 +1173,17 @@ def test_crossings_are_computed_over_the_conductors_of_every_pass(tmp_path):
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6 == rep["stats"]["n_crossings"]
     assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
+
+
+def test_false_crossings_are_those_far_from_every_true_one():
+    truth = {"conductor_lines_2d": [{"a": [0, 0], "b": [10, 0], "offset_m": 0.0},
+                                    {"a": [5, -5], "b": [5, 5], "offset_m": 0.0},
+                                    {"a": [0, 3], "b": [10, 3], "offset_m": 0.0, "bundle_offset_m": 0.2}],
+             "crossings": [{"x": 5.0, "y": 0.0, "lines": [0, 1]}, {"x": 5.0, "y": 3.0, "lines": [2, 1]}]}
+    # at a crossing, at the bundle centre line's crossing (5, 3.2), 2 m off, none near at all
+    found = np.array([[5.02, 0.0], [5.0, 3.2], [7.0, 0.0], [40.0, 40.0]])
+    assert false_crossings(found, truth) == 2
+    assert false_crossings(found[:2], truth) == 0 and false_crossings(np.zeros((0, 2)), truth) == 0
 
 
 def test_crossings_within_5_cm_of_truth(corridor_result):
@@ -1237,6 +1289,20 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
     # every drawn span is a wire's: its catenary fits (part2_ai's pieces through crowns do not)
     c3 = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors_3d")
     assert len(c3) and (c3.rms_m <= 0.2).all(), c3.rms_m.max()
+    # the poles that carry the wires, against the CMU utility-pole label: every pole found stands
+    # on one (within 0.5 m of its points' middle); part3_an's third pole, in a wire tangle, and
+    # part3_ak's, away from the wires scanned, are not found
+    src = laspy.read(path)
+    labelled = np.column_stack([src.x, src.y])[np.asarray(src.cmu_label) == 1103]
+    py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
+    poles = py[py["kind"] == "pole"]
+    assert len(poles) >= {"part3_an": 2, "part3_ak": 0, "part2_ai": 3}[name]
+    for g in poles.geometry:
+        near = labelled[np.hypot(labelled[:, 0] - g.x, labelled[:, 1] - g.y) <= 1.0]
+        assert len(near) >= 20 and np.hypot(*(near.mean(axis=0) - [g.x, g.y])) <= 0.5, (g.x, g.y)
+    if len(poles):  # tower points: the poles' columns, not the crowns beside them (P 0.06 before)
+        out = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 15
+        assert (out & (np.asarray(src.classification) == 15)).sum() >= 0.6 * out.sum()
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):

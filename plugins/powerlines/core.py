@@ -1240,6 +1240,7 @@ class Pylon:
     heading_deg: float
     cells: np.ndarray  # flat indices (on the search grid) of the tower's footprint
     grid: tuple  # the search grid: (x0, y0, cell_m, rows, cols)
+    kind: str = "tower"  # "tower" (the column-and-span-ends rule) or "pole" (a thin vertical column)
 
 
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
@@ -1355,6 +1356,77 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
         found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                            (x0, y0, cell_m, rows, cols)))
+    return found
+
+
+def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None,
+               top_share: float = 0.8, radius_m: float = 0.25, ring_m: float = 0.75, window_m: float = 2.0,
+               min_thin_m: float = 2.5, min_fill: float = 0.6, wire_reach_m: float = 2.0, end_radius_m: float = 10.0,
+               column_m: float = 0.45, voxel_m: float = 0.05) -> list[Pylon]:
+    """Poles that carry the wires: thin vertical columns, as a street scanner sees wooden and
+    steel poles (a crown beside the pole is no part of it, a tree trunk ends in its crown).
+
+    x, y, hag: the off-ground, off-wire points (metres; hag = height above ground); wire_x,
+    wire_y, wire_hag: the points of the wires found; line_headings, lines_xy as ``find_pylons``.
+
+    On the points thinned to ``voxel_m`` voxels, a point is *thin* where its cylinder of
+    ``radius_m`` and ``window_m`` height holds points and the ring out to ``ring_m`` almost none
+    (under a quarter as many): a pole's surface, not a crown, a wall or a roof edge. Thin points
+    linked in plan (0.3 m) are a pole when they rise over ``min_thin_m``, its column (points
+    within ``column_m`` of the axis) fills ``min_fill`` of the 0.5 m layers from 1 m above the
+    ground up to its thin part's top, a wire passes within ``wire_reach_m`` of its axis, and it
+    stands at least ``top_share`` as high as those wires (a street light under them does not).
+    Its top is where the column above the thin part first breaks by 1.5 m."""
+    if len(x) < 5 or len(wire_x) == 0:
+        return []
+    v = np.unique(np.floor(np.column_stack([x, y, hag]) / voxel_m).astype(np.int64), axis=0)
+    p = (v + 0.5) * voxel_m
+    half = window_m / 2
+    # cylinders as ellipsoids: heights scaled so that one ball is radius_m across and window_m high
+    inner = cKDTree(np.column_stack([p[:, :2], p[:, 2] * radius_m / half]))
+    outer = cKDTree(np.column_stack([p[:, :2], p[:, 2] * ring_m / half]))
+    n_in = inner.query_ball_point(inner.data, radius_m, return_length=True)
+    n_out = outer.query_ball_point(outer.data, ring_m, return_length=True)
+    thin = (n_in >= 6) & (n_out - n_in <= 0.25 * n_in) & (p[:, 2] >= 1.0)
+    t = p[thin]
+    if len(t) < 5:
+        return []
+    pairs = cKDTree(t[:, :2]).query_pairs(0.3, output_type="ndarray")
+    _, lab = connected_components(sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                                    shape=(len(t), len(t))), directed=False)
+    plan, wires = cKDTree(p[:, :2]), cKDTree(np.column_stack([wire_x, wire_y]))
+    wire_hag = np.asarray(wire_hag, float)
+    ends = cKDTree(np.asarray(span_ends, float)) if span_ends is not None and len(span_ends) else None
+    cell = 0.1
+    k_cells = int(np.ceil(column_m / cell)) + 1
+    found = []
+    for k in np.unique(lab):
+        g = t[lab == k]
+        if np.ptp(g[:, 2]) < min_thin_m:
+            continue
+        axis = np.median(g[:, :2], axis=0)
+        h = np.sort(p[plan.query_ball_point(axis, column_m), 2])
+        thin_top = float(g[:, 2].max())
+        layers = np.unique(np.floor(h[(h >= 1.0) & (h <= thin_top)] / 0.5))
+        if len(layers) < min_fill * max(np.ceil((thin_top - 1.0) / 0.5), 1):
+            continue
+        above = h[h >= thin_top]
+        breaks = np.flatnonzero(np.diff(above) > 1.5)
+        top = float(above[breaks[0]] if len(breaks) else above[-1])
+        nb = wires.query_ball_point(axis, wire_reach_m)
+        if not nb or top < top_share * float(wire_hag[nb].max()):
+            continue
+        dist = [_point_segment_distance(axis[0], axis[1], a, b) for a, b in lines_xy]
+        n_ends = len(ends.query_ball_point(axis, end_radius_m)) if ends is not None else 0
+        # its footprint: the cells of a fine grid around the axis within column_m of it
+        x0, y0 = axis - k_cells * cell
+        side = 2 * k_cells
+        cc, rr = np.meshgrid(np.arange(side), np.arange(side))
+        centre_d = np.hypot(x0 + (cc + 0.5) * cell - axis[0], y0 + (rr + 0.5) * cell - axis[1])
+        cells = (rr * side + cc)[centre_d <= column_m].ravel()
+        found.append(Pylon(float(axis[0]), float(axis[1]), max(top, float(wire_hag[nb].max())), n_ends,
+                           float(line_headings[int(np.argmin(dist))]) if dist else 0.0, cells,
+                           (float(x0), float(y0), cell, side, side), kind="pole"))
     return found
 
 

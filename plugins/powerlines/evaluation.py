@@ -49,3 +49,17 @@ def crossing_errors(found_xy: np.ndarray, truth: dict) -> list[float]:
         out.append(min((float(np.min(np.hypot(found_xy[:, 0] - x, found_xy[:, 1] - y))) for x, y in places),
                        default=np.inf) if len(found_xy) else np.inf)
     return out
+
+
+def false_crossings(found_xy: np.ndarray, truth: dict, max_m: float = 1.0) -> int:
+    """How many found crossings (``found_xy``: (n, 2)) lie farther than ``max_m`` from every true
+    crossing (at either of the places ``crossing_errors`` measures to): crossings of a false
+    line, or plan junctions of lines that do not cross."""
+    found_xy = np.asarray(found_xy, float).reshape(-1, 2)
+    if not len(found_xy):
+        return 0
+    near = np.zeros(len(found_xy), bool)
+    for k in range(len(truth["crossings"])):
+        one = dict(truth, crossings=[truth["crossings"][k]])
+        near |= np.array([crossing_errors(f[None, :], one)[0] <= max_m for f in found_xy])
+    return int((~near).sum())

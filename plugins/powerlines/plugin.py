@@ -12,6 +12,8 @@ from toolbox import Algorithm, DataError, Input, LayerMerge, Output, Parameter
 # surveys as dense or denser keep the method's value and sparser ones scale it
 V_MAX_METHOD_M = 2.5
 GAP_SPACINGS = 10.0
+# a tower found this close to a pole is the pole's (its span ends and a crown beside it)
+POLE_TAKES_M = 6.0
 
 REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
@@ -243,7 +245,7 @@ def _run(inputs, params, ctx):
              "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
-             "n_pylons": len(pylons), "n_tower_points": int(tower_pt.sum()),
+             "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
 
@@ -254,7 +256,7 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     import numpy as np
     from shapely.geometry import Point
 
-    from .core import catenary, find_pylons, pylon_points
+    from .core import catenary, find_poles, find_pylons, pylon_points
 
     off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
     ends, end_z, span_lines = [], [], []
@@ -273,6 +275,14 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     headings = [float(np.degrees(np.arctan2(b[1] - a[1], b[0] - a[0])) % 180.0) for a, b in lines_xy]
     found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
                         lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines)
+    wire = conductor_of >= 0
+    poles = find_poles(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu, hag[wire],
+                       headings, lines_xy, span_ends=ends, top_share=params["pylon_top_share"])
+    if poles:
+        # where a pole carries the wires, a tower found beside it is the crown next to the pole
+        # that took its span ends (a street scan's trees reach the wires' height)
+        pxy = np.array([[q.x, q.y] for q in poles])
+        found = [t for t in found if np.hypot(*(pxy - [t.x, t.y]).T).min() > POLE_TAKES_M] + poles
     tower = np.zeros(len(pc), bool)
     # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
     cand = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2))
@@ -283,10 +293,11 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
         x, y = p.x / hu, p.y / hu
         z = float(dtm.sample(np.array([x]), np.array([y]))[0])
         geoms.append(Point(x, y, z))
-        rows.append({"pylon": i, "height_m": round(p.height_m, 2), "n_spans": p.n_spans,
+        rows.append({"pylon": i, "kind": p.kind, "height_m": round(p.height_m, 2), "n_spans": p.n_spans,
                      "line_heading_deg": round(p.heading_deg, 2), "n_points": int(inside.sum())})
     gdf = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
-        {"pylon": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+        {"pylon": np.array([], np.int64), "kind": np.array([], str)}, geometry=gpd.GeoSeries([], crs=pc.crs),
+        crs=pc.crs)
     gdf.attrs["geometry_type"] = "Point Z"
     return gdf, tower, found
 
@@ -411,7 +422,9 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
         x0, y0, cell_m, rows, cols = p.grid
         r, c = np.divmod(np.asarray(p.cells), cols)
         far = np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max() + cell_m
-        towers.append((p.x, p.y, max(end_radius_m, far), far + 1.0))
+        # a pole's arm is a cross arm of a metre or two: the wires leaving it across the street are wires
+        towers.append((p.x, p.y, far + 1.5, far + 1.0) if p.kind == "pole" else
+                      (p.x, p.y, max(end_radius_m, far), far + 1.0))
     lines = [LineString(np.asarray(g.coords)[:, :2] * hu) for g in cond.geometry]
     ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
     unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
@@ -708,8 +721,11 @@ def toolbox_algorithms():
             "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
-            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (layer pylons: base point, height, spans, line heading; "
-            "class 15 in the classified output); crossings over the final conductors, whichever pass found them "
+            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column, and "
+            "poles: thin vertical columns (a ring of 0.25-0.75 m around them almost empty over 2 m of height, over "
+            "2.5 m of it) with a wire within 2 m and at least pylon_top_share as high as it; a tower found within "
+            "6 m of a pole is the crown beside it (layer pylons: kind tower or pole, base point, height, spans, "
+            "line heading; class 15 in the classified output: a pole's column within 0.45 m of its axis); crossings over the final conductors, whichever pass found them "
             "(confirmed by extents or segments as in the Hough). GeoPackage layers conductors, conductor_segments, "
             "crossings, conductors_3d, pylons."),
         reference=REFERENCE,
