@@ -509,6 +509,8 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
             tp = int((t_tow & pred).sum())
             row["tower_point_precision"] = round(tp / max(int(pred.sum()), 1), 3)
             row["tower_point_recall"] = round(tp / int(t_tow.sum()), 3)
+        if "n_towers_truth" not in row and "cmu_label" in laspy.open(p).header.point_format.dimension_names:
+            row.update(_score_poles(laspy.read(p), tmp / "pl.gpkg"))
         row["cell_size_m_used"] = rep["stats"].get("cell_size_m_used")
         print_row(row)
         found = f"{row['n_conductors']}"
@@ -520,6 +522,9 @@ def bench_powerlines(tmp: Path, large: bool = True, quick: bool = False) -> list
         pr = f"; wire points P {row['wire_precision']:.3f} R {row['wire_recall']:.3f}" if "wire_recall" in row else ""
         if "tower_point_recall" in row:
             pr += f"; tower points (class 15) P {row['tower_point_precision']:.3f} R {row['tower_point_recall']:.3f}"
+        if "n_poles_truth" in row:
+            pr += (f"; supports {row['n_poles_2m']}/{row['n_poles_truth']} labelled poles within 2 m, "
+                   f"{row['n_supports_false']} false")
         print(f"  {row['s_per_million']:.2f} s per million points warm, {row['cli_s_per_million']:.2f} from the command "
               f"line in a fresh process; conductors {found}{pr}; stages: {row['stages_s']}")
         rows.append(row)
@@ -945,6 +950,27 @@ def _bench_outlines(tmp: Path) -> list[dict]:
         print(f"  building-edges AHN3 Amsterdam against BAG footprints: IoU {', '.join(f'{v:.3f}' for v in ious)} "
               f"(median {np.median(ious):.3f}), {t:.2f} s", flush=True)
     return rows
+
+
+def _score_poles(las, gpkg: Path) -> dict:
+    """A street scan's ``pylons`` against the CMU utility-pole label (1103): each labelled pole
+    (its points linked within 1 m in plan, 20 or more) found when a pylon stands within 2 m of
+    its middle; a pylon farther than 2 m from every one is false."""
+    import geopandas as gpd
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    q = np.column_stack([las.x, las.y])[np.asarray(las.cmu_label) == 1103]
+    pairs = cKDTree(q).query_pairs(1.0, output_type="ndarray")
+    _, lab = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                             shape=(len(q), len(q))), directed=False)
+    poles = np.array([q[lab == k].mean(axis=0) for k in np.unique(lab) if (lab == k).sum() >= 20]).reshape(-1, 2)
+    py = gpd.read_file(gpkg, layer="pylons")
+    xy = np.column_stack([py.geometry.x, py.geometry.y]) if len(py) else np.zeros((0, 2))
+    d = np.hypot(*(poles[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) if len(xy) and len(poles) else None
+    return {"n_poles_truth": len(poles), "n_poles_2m": int((d.min(axis=1) <= 2.0).sum()) if d is not None else 0,
+            "n_supports_false": int((d.min(axis=0) > 2.0).sum()) if d is not None else len(xy)}
 
 
 def _score_corridor(truth: dict, gpkg: Path) -> dict:
