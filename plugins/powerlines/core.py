@@ -1379,6 +1379,22 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     Its top is where the column above the thin part first breaks by 1.5 m."""
     if len(x) < 5 or len(wire_x) == 0:
         return []
+    # only the points within reach of a wire (the axis within wire_reach_m, its ring beyond): on
+    # 1 m cells, those of the wires grown by that distance
+    x_min, y_min = min(x.min(), wire_x.min()), min(y.min(), wire_y.min())
+    grow = int(np.ceil(wire_reach_m + ring_m))
+    wc, wr = np.floor(wire_x - x_min).astype(np.int64), np.floor(wire_y - y_min).astype(np.int64)
+    pc, pr = np.floor(x - x_min).astype(np.int64), np.floor(y - y_min).astype(np.int64)
+    shape = (int(max(pr.max(), wr.max())) + 1, int(max(pc.max(), wc.max())) + 1)
+    reach = np.zeros(shape, bool)
+    reach[wr, wc] = True
+    from scipy import ndimage
+
+    reach = ndimage.binary_dilation(reach, np.ones((3, 3), bool), iterations=grow)
+    near = reach[pr, pc]
+    x, y, hag = x[near], y[near], hag[near]
+    if len(x) < 5:
+        return []
     v = np.unique(np.floor(np.column_stack([x, y, hag]) / voxel_m).astype(np.int64), axis=0)
     p = (v + 0.5) * voxel_m
     half = window_m / 2
