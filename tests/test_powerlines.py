@@ -1175,6 +1175,42 @@ def test_crossings_are_computed_over_the_conductors_of_every_pass(tmp_path):
     assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
 
 
+def test_mobile_double_circuit_crossings_stop_at_the_last_pole(tmp_path):
+    """A double circuit seen by a mobile scanner, line B ending at a pole just short of line A's
+    far circuit: B crosses the three conductors of the near one only (9 of 9 true; 11 reported
+    while the 5 m extension carried B past its last pole)."""
+    path = tmp_path / "m.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", seed=1, scanner="mobile", density_ppm2=200.0,
+                width_m=300.0, height_m=120.0)
+    truth = json.loads(path.with_name("m_truth.json").read_text())
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg")
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = conductor_hits(cond, truth)
+    assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"])))
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    cr_xy = np.column_stack([cr.geometry.x, cr.geometry.y])
+    assert len(cr) == len(truth["crossings"]) == 9 and false_crossings(cr_xy, truth) == 0
+    assert max(crossing_errors(cr_xy, truth)) <= 0.05
+
+
+def test_a_line_ending_at_a_support_crosses_nothing_past_it():
+    """The method's 5 m extension carries a line that ends at its last pole on to the line beside
+    the pole (the synthetic mobile double circuit's 2 false crossings); with the supports found,
+    a line ending at one crosses nothing more than a metre past that end. A line that runs on
+    through the other, or ends within a metre of it, still crosses it."""
+    a = (np.array([0.0, 0.0]), np.array([1.0, 0.0]))
+    b = (np.array([50.0, -50.0]), np.array([0.0, 1.0]))
+    seg_a = [(np.array([0.0, 0.0]), np.array([100.0, 0.0]))]
+    pole = [(50.0, -2.5, 3.0)]
+    for b_end, supports, n in ((-2.0, None, 1), (-2.0, pole, 0), (-0.8, pole, 1), (20.0, pole, 1)):
+        seg_b = [(np.array([50.0, -50.0]), np.array([50.0, b_end]))]
+        got = crossings([a, b], [seg_a, seg_b], supports=supports)
+        assert len(got) == n, (b_end, supports, got)
+    # a support that is not at the line's end (30 m along it) changes nothing
+    seg_b = [(np.array([50.0, -50.0]), np.array([50.0, -2.0]))]
+    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, -30.0, 3.0)])) == 1
+
+
 def test_false_crossings_are_those_far_from_every_true_one():
     truth = {"conductor_lines_2d": [{"a": [0, 0], "b": [10, 0], "offset_m": 0.0},
                                     {"a": [5, -5], "b": [5, 5], "offset_m": 0.0},

@@ -18,20 +18,39 @@ def intersect(p1, d1, p2, d2):
     return np.asarray(p1) + s * np.asarray(d1)
 
 
-def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, merge_m: float = 1.0):
+def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, merge_m: float = 1.0,
+              supports=None, beyond_m: float = 1.0):
     """Crossings of conductor lines (the method's §5): pairwise intersections of the fitted lines,
     kept where some pair of validated segments (each extended by ``extend_m``) also intersects
     within ``tolerance_m``; where several lines meet (every pair of them crossing within ``merge_m``)
     their crossings are averaged.
 
-    ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). Returns a list of
-    dicts (x, y, n_lines, angle_deg, lines).
+    ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). With ``supports``
+    [(x, y, reach_m)] (towers and poles found), an intersection more than ``beyond_m`` past the
+    end of a line's segments, where that end is within a support's reach, is not a crossing: the
+    line ends at the support (the method's crossings are not pylon positions), and the extension
+    would carry it on to the line beside the pole. Returns a list of dicts (x, y, n_lines,
+    angle_deg, lines).
     """
+    sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
+    sup_reach = np.asarray([s_[2] for s_ in supports], float) if supports else np.zeros(0)
+
+    def ends_at_support(k, p):
+        a, d = np.asarray(lines[k][0], float), np.asarray(lines[k][1], float)
+        t_ends = np.array([[(np.asarray(e, float) - a) @ d for e in seg] for seg in segments[k]]).ravel()
+        t = (p - a) @ d
+        for t_end, past in ((t_ends.min(), t < t_ends.min() - beyond_m), (t_ends.max(), t > t_ends.max() + beyond_m)):
+            if past and np.any(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach):
+                return True
+        return False
+
     found = []
     for i in range(len(lines)):
         for j in range(i + 1, len(lines)):
             p = intersect(lines[i][0], lines[i][1], lines[j][0], lines[j][1])
             if p is None:
+                continue
+            if len(sup) and (ends_at_support(i, p) or ends_at_support(j, p)):
                 continue
             ok = False
             for a1, b1 in segments[i]:

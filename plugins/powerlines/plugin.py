@@ -222,7 +222,7 @@ def _run(inputs, params, ctx):
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
-    crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu)
+    crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
               "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
@@ -640,11 +640,13 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     return {"conductors": new_cond, "conductor_segments": seg}
 
 
-def _crossings_of(cond, segs, validation: str, hu: float):
+def _crossings_of(cond, segs, validation: str, hu: float, found=()):
     """The ``crossings`` layer of the final conductors, whichever pass found them: pairs of plan
     lines (``cond``) confirmed by their extents or (``segments``, the paper) by their validated
     ``segs``, as the Hough confirms its own. A crossing the Hough merged with a line dropped
-    later (a tower member through the same point) is then still a crossing of the lines kept."""
+    later (a tower member through the same point) is then still a crossing of the lines kept.
+    A line that ends at a found tower or pole (``found``; its footprint's reach and 3 m) crosses
+    nothing past that end."""
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point
@@ -660,7 +662,13 @@ def _crossings_of(cond, segs, validation: str, hu: float):
         lines.append((a, (b - a) / max(float(np.hypot(*(b - a))), 1e-12)))
         checks.append([(a, b)] if validation == "extent" else
                       [ends(s) for s in segs.geometry[(segs["conductor"] == i).to_numpy()]])
-    cross = crossings(lines, checks)
+    supports = []
+    for p in found:
+        x0, y0, cell_m, rows_, cols = p.grid
+        r, c = np.divmod(np.asarray(p.cells), cols)
+        far = float(np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max()) + cell_m
+        supports.append((p.x, p.y, max(3.0, far + 1.0)))
+    cross = crossings(lines, checks, supports=supports)
     rows = [{"n_lines": k["n_lines"], "angle_deg": k["angle_deg"], "conductors": ",".join(map(str, k["lines"]))}
             for k in cross]
     geoms = gpd.GeoSeries([Point(k["x"] / hu, k["y"] / hu) for k in cross], crs=cond.crs)
@@ -726,7 +734,9 @@ def toolbox_algorithms():
             "2.5 m of it) with a wire within 2 m and at least pylon_top_share as high as it; a tower found within "
             "6 m of a pole is the crown beside it (layer pylons: kind tower or pole, base point, height, spans, "
             "line heading; class 15 in the classified output: a pole's column within 0.45 m of its axis); crossings over the final conductors, whichever pass found them "
-            "(confirmed by extents or segments as in the Hough). GeoPackage layers conductors, conductor_segments, "
+            "(confirmed by extents or segments as in the Hough), none more than 1 m past the end of a line at a "
+            "tower or pole found (the method's crossings are not pylon positions). GeoPackage layers conductors, "
+            "conductor_segments, "
             "crossings, conductors_3d, pylons."),
         reference=REFERENCE,
         tile_buffer_m=_tile_buffer_m,
