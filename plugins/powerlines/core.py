@@ -1241,6 +1241,7 @@ class Pylon:
     cells: np.ndarray  # flat indices (on the search grid) of the tower's footprint
     grid: tuple  # the search grid: (x0, y0, cell_m, rows, cols)
     kind: str = "tower"  # "tower" (the column-and-span-ends rule) or "pole" (a thin vertical column)
+    head_m: float = 0.0  # a pole's head: its points within this of the axis, in its top metre (cross arms)
 
 
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
@@ -1362,7 +1363,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
 def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None,
                top_share: float = 0.8, radius_m: float = 0.25, ring_m: float = 0.75, window_m: float = 2.0,
                min_thin_m: float = 2.5, min_fill: float = 0.6, wire_reach_m: float = 2.0, end_radius_m: float = 10.0,
-               column_m: float = 0.45, voxel_m: float = 0.05) -> list[Pylon]:
+               column_m: float = 0.45, voxel_m: float = 0.05, head_m: float = 1.8) -> list[Pylon]:
     """Poles that carry the wires: thin vertical columns, as a street scanner sees wooden and
     steel poles (a crown beside the pole is no part of it, a tree trunk ends in its crown).
 
@@ -1376,7 +1377,8 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     within ``column_m`` of the axis) fills ``min_fill`` of the 0.5 m layers from 1 m above the
     ground up to its thin part's top, a wire passes within ``wire_reach_m`` of its axis, and it
     stands at least ``top_share`` as high as those wires (a street light under them does not).
-    Its top is where the column above the thin part first breaks by 1.5 m."""
+    Its top is where the column above the thin part first breaks by 1.5 m; its points are its
+    column and its head (within ``head_m`` of the axis in its top metre: cross arms, insulators)."""
     if len(x) < 5 or len(wire_x) == 0:
         return []
     # only the points within reach of a wire (the axis within wire_reach_m, its ring beyond): on
@@ -1442,7 +1444,7 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         cells = (rr * side + cc)[centre_d <= column_m].ravel()
         found.append(Pylon(float(axis[0]), float(axis[1]), max(top, float(wire_hag[nb].max())), n_ends,
                            float(line_headings[int(np.argmin(dist))]) if dist else 0.0, cells,
-                           (float(x0), float(y0), cell, side, side), kind="pole"))
+                           (float(x0), float(y0), cell, side, side), kind="pole", head_m=head_m))
     return found
 
 
@@ -1475,6 +1477,8 @@ def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
         gaps = np.flatnonzero(h[:-1] - h[1:] > max_gap_m)
         if len(gaps):
             inside &= hag >= h[gaps[0]]
+    if hag is not None and p.head_m > 0:
+        inside |= (np.hypot(x - p.x, y - p.y) <= p.head_m) & (hag >= p.height_m - 1.0) & (hag <= p.height_m + 0.3)
     return inside
 
 

@@ -733,7 +733,7 @@ def toolbox_algorithms():
             "poles: thin vertical columns (a ring of 0.25-0.75 m around them almost empty over 2 m of height, over "
             "2.5 m of it) with a wire within 2 m and at least pylon_top_share as high as it; a tower found within "
             "6 m of a pole is the crown beside it (layer pylons: kind tower or pole, base point, height, spans, "
-            "line heading; class 15 in the classified output: a pole's column within 0.45 m of its axis); crossings over the final conductors, whichever pass found them "
+            "line heading; class 15 in the classified output: a pole's column within 0.45 m of its axis and its head, within 1.8 m in its top metre); crossings over the final conductors, whichever pass found them "
             "(confirmed by extents or segments as in the Hough), none more than 1 m past the end of a line at a "
             "tower or pole found (the method's crossings are not pylon positions). GeoPackage layers conductors, "
             "conductor_segments, "
