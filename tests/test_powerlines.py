@@ -604,6 +604,16 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
                                                                  LineString([(52, 41), (52, 51)])])
     assert _arms(cond2, [big], 1.0) == {1}
     assert _arms(cond2, [], 1.0) == set()
+    # which towers hold arms; with own_only (a structure the wires run through) only a line that
+    # never leaves its own extent is an arm, not one crossing the line within the 10 m reach
+    held = []
+    assert _arms(cond, [big, pole], 1.0, with_arms=held) == {1, 3} and held == [0]
+    cond3 = gpd.GeoDataFrame({"conductor": range(3)}, geometry=[LineString([(0, 50), (100, 50)]),
+                                                                 LineString([(52, 41), (52, 51)]),
+                                                                 LineString([(51, 47), (51, 53)])])
+    assert _arms(cond3, [big], 1.0) == {1, 2}
+    held = []
+    assert _arms(cond3, [big], 1.0, with_arms=held, own_only=True) == {2} and held == [0]
 
 
 def _pole_points(rng, x, y, height_m, radius_m=0.15, per_m=60):
@@ -1176,6 +1186,29 @@ def test_crossings_are_computed_over_the_conductors_of_every_pass(tmp_path):
     cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
     assert len(cr) == len(truth["crossings"]) == 6 == rep["stats"]["n_crossings"]
     assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
+
+
+def test_towers_the_wires_run_through_keep_their_arms(tmp_path):
+    """60 m spans (seed 3): at three towers the 3D step does not cut the wires, so more spans run
+    past than end there, as past a tree. Where one of them has a line that never leaves it, that
+    line is its arm and it is a tower (the false conductor and its 5 false crossings before); a
+    tower whose arms were taken in the first search stays one without their span ends (14 of 17
+    towers before, 16 now)."""
+    path = tmp_path / "s.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", seed=3, span_m=60.0)
+    truth = json.loads(path.with_name("s_truth.json").read_text())
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg")
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = conductor_hits(cond, truth)
+    assert sorted({k for k, _ in hits}) == list(range(len(truth["conductor_lines_2d"]))) and len(cond) == len(hits)
+    cr = gpd.read_file(tmp_path / "pl.gpkg", layer="crossings")
+    cr_xy = np.column_stack([cr.geometry.x, cr.geometry.y])
+    assert max(crossing_errors(cr_xy, truth)) <= 0.05 and false_crossings(cr_xy, truth) == 0
+    py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
+    d = [np.hypot(py.geometry.x - q["x"], py.geometry.y - q["y"]).min() for q in truth["pylons"]]
+    assert sum(x <= 2.0 for x in d) >= 16
+    assert all(min(np.hypot(x - q["x"], y - q["y"]) for q in truth["pylons"]) <= 2.0
+               for x, y in zip(py.geometry.x, py.geometry.y))
 
 
 def test_mobile_double_circuit_crossings_stop_at_the_last_pole(tmp_path):

@@ -1247,7 +1247,7 @@ class Pylon:
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
                 reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
                 end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
-                max_rugged: float = 0.7, min_slenderness: float = 2.0):
+                max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -1268,7 +1268,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     where no tower stands: that is what the column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
     ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
     the square root of its footprint, arms included). The base is the middle of the column
-    cells (the body; the arms reach out across the line).
+    cells (the body; the arms reach out across the line). ``passed_by``, a list, gets the
+    candidates that more spans run past than end at (a tree, or a suspension tower the wires run
+    through: its arms, if found as lines, tell).
     """
     from scipy import ndimage
 
@@ -1346,17 +1348,18 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         n_ends = int(np.sum(owner == k))
         if n_ends < min_ends:
             continue
-        if span_lines is not None:
-            n_past = sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m))
-            if n_past >= n_ends:
-                continue
+        passed = span_lines is not None and \
+            sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m)) >= n_ends
+        if passed and passed_by is None:
+            continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
         # a tower reaches the wires it carries (where they sit on its top, its top points are wire points)
         height = max(height, float(np.max(span_end_hag[owner == k])))
         standing = structure & (top >= 0.5 * height)  # legs and body reach up to the head; bushes do not
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
-        found.append(Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
-                           (x0, y0, cell_m, rows, cols)))
+        (passed_by if passed else found).append(
+            Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
+                  (x0, y0, cell_m, rows, cols)))
     return found
 
 

@@ -156,14 +156,23 @@ def _run(inputs, params, ctx):
     t = time.perf_counter()
     conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
     conductor_of[keep] = line_of
-    pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu, dtm, params)
-    arms = _arms(lines["conductors"], found, hu)
+    passed_by = []
+    pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu, dtm,
+                                      params, passed_by=passed_by)
+    with_arms, own_arms = [], []
+    arms = _arms(lines["conductors"], found, hu, with_arms=with_arms)
+    # a tower the wires run through (a suspension tower where the 3D step did not cut them) has
+    # more spans past it than ending at it, as a tree has; a line that never leaves it is its arm
+    arms |= _arms(lines["conductors"], passed_by, hu, with_arms=own_arms, own_only=True)
     if arms:
         kept = [i for i in range(len(geo)) if i not in arms]
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
         conductor_of[keep] = line_of
+        # a tower whose arms were taken for conductors stays one, though without their span ends
+        # too few may end at it (a suspension tower the wires run through)
         pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu,
-                                          dtm, params)
+                                          dtm, params, also=[found[i] for i in sorted(set(with_arms))] +
+                                          [passed_by[i] for i in sorted(set(own_arms))])
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
         # on AHN4: the wire between the arms is class 15)
@@ -250,8 +259,9 @@ def _run(inputs, params, ctx):
     return toolbox.Result(out, stats=stats)
 
 
-def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params):
-    """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points."""
+def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params, also=(), passed_by=None):
+    """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points; towers of
+    ``also`` (found before) are kept where none is found within 2 m of them now."""
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point
@@ -274,7 +284,8 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     lines_xy = [(np.array(g.coords[0]) * hu, np.array(g.coords[-1]) * hu) for g in cond.geometry]
     headings = [float(np.degrees(np.arctan2(b[1] - a[1], b[0] - a[0])) % 180.0) for a, b in lines_xy]
     found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
-                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines)
+                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by)
+    found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
     wire = conductor_of >= 0
     poles = find_poles(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu, hag[wire],
                        headings, lines_xy, span_ends=ends, top_share=params["pylon_top_share"])
@@ -404,14 +415,16 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
     return lines, geo, spans, line_of, np.where(line_of >= 0, 0, -1), 0
 
 
-def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0) -> set:
+def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0, with_arms=None,
+          own_only: bool = False) -> set:
     """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
     ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
     conductor reaching the same tower at ``min_angle_deg`` or more: straight, level lines that
     never leave the tower, across its line, are its arms. (A short wire to a pole with nothing
     across it stays a wire.) A conductor within the tower's own extent (its cells' reach and a
     metre) is part of it whatever crosses it: the arms of a tower whose line is not found there
-    (a gap in the data beside it)."""
+    (a gap in the data beside it). ``with_arms``, a list, gets the indices of the towers with arms;
+    ``own_only``: only the lines within a tower's own extent."""
     if not found or not len(cond):
         return set()
     import numpy as np
@@ -429,15 +442,19 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
     unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
     arms = set()
-    for x, y, reach, own in towers:
-        inside = [i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= reach).all()]
-        arms |= {i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= own).all()}
+    for k, (x, y, reach, own) in enumerate(towers):
+        mine = {i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= own).all()}
+        inside = [] if own_only else \
+            [i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= reach).all()]
         at = Point(x, y)
         for i in inside:
             across = [j for j, g in enumerate(lines) if j not in inside and g.distance(at) <= reach
                       and abs(float(unit[i] @ unit[j])) <= np.cos(np.radians(min_angle_deg))]
             if across:
-                arms.add(i)
+                mine.add(i)
+        if mine and with_arms is not None:
+            with_arms.append(k)
+        arms |= mine
     return arms
 
 
@@ -729,7 +746,8 @@ def toolbox_algorithms():
             "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
-            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column, and "
+            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (or "
+            "where the wires run through it uncut, when a line never leaves it: its arm), and "
             "poles: thin vertical columns (a ring of 0.25-0.75 m around them almost empty over 2 m of height, over "
             "2.5 m of it) with a wire within 2 m and at least pylon_top_share as high as it; a tower found within "
             "6 m of a pole is the crown beside it (layer pylons: kind tower or pole, base point, height, spans, "
