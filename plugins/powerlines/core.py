@@ -1366,7 +1366,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
 def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None,
                top_share: float = 0.8, radius_m: float = 0.25, ring_m: float = 0.75, window_m: float = 2.0,
                min_thin_m: float = 2.5, min_fill: float = 0.6, wire_reach_m: float = 2.0, end_radius_m: float = 10.0,
-               column_m: float = 0.45, voxel_m: float = 0.05, head_m: float = 1.8) -> list[Pylon]:
+               column_m: float = 0.45, voxel_m: float = 0.05, head_m: float = 1.8,
+               max_ring_share: float = 0.6) -> list[Pylon]:
     """Poles that carry the wires: thin vertical columns, as a street scanner sees wooden and
     steel poles (a crown beside the pole is no part of it, a tree trunk ends in its crown).
 
@@ -1374,8 +1375,9 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     wire_y, wire_hag: the points of the wires found; line_headings, lines_xy as ``find_pylons``.
 
     On the points thinned to ``voxel_m`` voxels, a point is *thin* where its cylinder of
-    ``radius_m`` and ``window_m`` height holds points and the ring out to ``ring_m`` almost none
-    (under a quarter as many): a pole's surface, not a crown, a wall or a roof edge. Thin points
+    ``radius_m`` and ``window_m`` height holds points and the ring out to ``ring_m`` few (under
+    ``max_ring_share`` times as many, where points spread evenly, as over a crown, a wall or a
+    roof edge, give it 8 times as many; a pole's hardware and the wires leaving it give some). Thin points
     linked in plan (0.3 m) are a pole when they rise over ``min_thin_m``, its column (points
     within ``column_m`` of the axis) fills ``min_fill`` of the 0.5 m layers from 1 m above the
     ground up to its thin part's top, a wire passes within ``wire_reach_m`` of its axis, and it
@@ -1408,7 +1410,7 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     outer = cKDTree(np.column_stack([p[:, :2], p[:, 2] * ring_m / half]))
     n_in = inner.query_ball_point(inner.data, radius_m, return_length=True)
     n_out = outer.query_ball_point(outer.data, ring_m, return_length=True)
-    thin = (n_in >= 6) & (n_out - n_in <= 0.25 * n_in) & (p[:, 2] >= 1.0)
+    thin = (n_in >= 6) & (n_out - n_in <= max_ring_share * n_in) & (p[:, 2] >= 1.0)
     t = p[thin]
     if len(t) < 5:
         return []
@@ -1431,9 +1433,9 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         layers = np.unique(np.floor(h[(h >= 1.0) & (h <= thin_top)] / 0.5))
         if len(layers) < min_fill * max(np.ceil((thin_top - 1.0) / 0.5), 1):
             continue
-        above = h[h >= thin_top]
+        above = h[h >= thin_top]  # (none where the thin points spread wider than the column)
         breaks = np.flatnonzero(np.diff(above) > 1.5)
-        top = float(above[breaks[0]] if len(breaks) else above[-1])
+        top = float(above[breaks[0]] if len(breaks) else above[-1]) if len(above) else thin_top
         nb = wires.query_ball_point(axis, wire_reach_m)
         if not nb or top < top_share * float(wire_hag[nb].max()):
             continue
