@@ -34,15 +34,19 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
     """
     sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
     sup_reach = np.asarray([s_[2] for s_ in supports], float) if supports else np.zeros(0)
+    # per line, its segments' first and last position along it, and whether each end is at a support
+    extents = []
+    for (a, d), segs in zip(lines, segments) if len(sup) else ():
+        a, d = np.asarray(a, float), np.asarray(d, float)
+        t = np.array([(np.asarray(e, float) - a) @ d for seg in segs for e in seg]) if len(segs) else np.zeros(1)
+        at = [len(segs) > 0 and bool(np.any(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach))
+              for t_end in (t.min(), t.max())]
+        extents.append((a, d, t.min(), t.max(), at))
 
     def ends_at_support(k, p):
-        a, d = np.asarray(lines[k][0], float), np.asarray(lines[k][1], float)
-        t_ends = np.array([[(np.asarray(e, float) - a) @ d for e in seg] for seg in segments[k]]).ravel()
+        a, d, t0, t1, (at0, at1) = extents[k]
         t = (p - a) @ d
-        for t_end, past in ((t_ends.min(), t < t_ends.min() - beyond_m), (t_ends.max(), t > t_ends.max() + beyond_m)):
-            if past and np.any(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach):
-                return True
-        return False
+        return (at0 and t < t0 - beyond_m) or (at1 and t > t1 + beyond_m)
 
     found = []
     for i in range(len(lines)):

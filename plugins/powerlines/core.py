@@ -1243,6 +1243,12 @@ class Pylon:
     kind: str = "tower"  # "tower" (the column-and-span-ends rule) or "pole" (a thin vertical column)
     head_m: float = 0.0  # a pole's head: its points within this of the axis, in its top metre (cross arms)
 
+    def extent_m(self) -> float:
+        """How far its footprint reaches from its base: its farthest cell's centre and a cell."""
+        x0, y0, cell_m, _, cols = self.grid
+        r, c = np.divmod(np.asarray(self.cells), cols)
+        return float(np.hypot(x0 + (c + 0.5) * cell_m - self.x, y0 + (r + 0.5) * cell_m - self.y).max()) + cell_m
+
 
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
                 reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
@@ -1384,6 +1390,8 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     stands at least ``top_share`` as high as those wires (a street light under them does not).
     Its top is where the column above the thin part first breaks by 1.5 m; its points are its
     column and its head (within ``head_m`` of the axis in its top metre: cross arms, insulators)."""
+    from scipy import ndimage
+
     if len(x) < 5 or len(wire_x) == 0:
         return []
     # only the points within reach of a wire (the axis within wire_reach_m, its ring beyond): on
@@ -1395,8 +1403,6 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     shape = (int(max(pr.max(), wr.max())) + 1, int(max(pc.max(), wc.max())) + 1)
     reach = np.zeros(shape, bool)
     reach[wr, wc] = True
-    from scipy import ndimage
-
     reach = ndimage.binary_dilation(reach, np.ones((3, 3), bool), iterations=grow)
     near = reach[pr, pc]
     x, y, hag = x[near], y[near], hag[near]

@@ -432,9 +432,7 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
 
     towers = []
     for p in found:
-        x0, y0, cell_m, rows, cols = p.grid
-        r, c = np.divmod(np.asarray(p.cells), cols)
-        far = np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max() + cell_m
+        far = p.extent_m()
         # a pole's arm is a cross arm of a metre or two: the wires leaving it across the street are wires
         towers.append((p.x, p.y, far + 1.5, far + 1.0) if p.kind == "pole" else
                       (p.x, p.y, max(end_radius_m, far), far + 1.0))
@@ -679,13 +677,7 @@ def _crossings_of(cond, segs, validation: str, hu: float, found=()):
         lines.append((a, (b - a) / max(float(np.hypot(*(b - a))), 1e-12)))
         checks.append([(a, b)] if validation == "extent" else
                       [ends(s) for s in segs.geometry[(segs["conductor"] == i).to_numpy()]])
-    supports = []
-    for p in found:
-        x0, y0, cell_m, rows_, cols = p.grid
-        r, c = np.divmod(np.asarray(p.cells), cols)
-        far = float(np.hypot(x0 + (c + 0.5) * cell_m - p.x, y0 + (r + 0.5) * cell_m - p.y).max()) + cell_m
-        supports.append((p.x, p.y, max(3.0, far + 1.0)))
-    cross = crossings(lines, checks, supports=supports)
+    cross = crossings(lines, checks, supports=[(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found])
     rows = [{"n_lines": k["n_lines"], "angle_deg": k["angle_deg"], "conductors": ",".join(map(str, k["lines"]))}
             for k in cross]
     geoms = gpd.GeoSeries([Point(k["x"] / hu, k["y"] / hu) for k in cross], crs=cond.crs)
