@@ -848,6 +848,83 @@ def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wire
             kept.append(run)
     return kept
 
+def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, min_span_m: float, owner=None,
+                  owner_length=None, max_sep_m: float = 4.0, max_dz_m: float = 3.0, bin_m: float = 0.1, tol_m: float = 0.15,
+                  min_points: int = 12, min_cover: float = 0.5, cover_bin_m: float = 2.0,
+                  max_rounds: int = 6) -> list:
+    """Wires hanging beside a fitted span, too sparse for the Hough and the 3D step to find alone
+    (a mobile scanner's view of the far phase of a line crossing its street, 10-45 m away): the
+    phases of one line hang side by side, parallel, with nearly the same sag, so beside each
+    span (``min_sep_m``-``max_sep_m`` across, within ``max_dz_m`` in height) the points of
+    another phase share one lateral offset and one height offset from its catenary.
+
+    Per span that fits (rms <= ``max_rms``) at least ``min_span_m`` long: the points ``p*`` (those on no wire, in metres) are
+    binned by (offset across, height above the catenary) at ``bin_m``; the fullest 2x2 window
+    whose points, refitted as a catenary of their own (at most ``max_rms``), number
+    ``min_points`` within ``tol_m`` of its plan trend and curve, reach ``min_span_m`` along it
+    (the method's S_min: the leftover points of a found wire near its tower are no wire of their
+    own) and occupy ``min_cover`` of the span's ``cover_bin_m`` steps is a wire, its points
+    taken; up to ``max_rounds`` per span.
+    With ``owner`` (the line each point is on, -1: none) and ``owner_length`` (that line's
+    length), the points of lines shorter than the span's own line are searched too: the stretch
+    of a sparse phase the Hough found alone near its pole.
+    Returns [(indices into p*, line index, s of those points, offset across)] per wire found.
+    ``lines`` as for conductors_3d."""
+    found = []
+    taken = np.zeros(len(px), bool)
+    if owner is None:
+        owner, owner_length = np.full(len(px), -1), np.zeros(len(px))
+    for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
+        open_ = (owner < 0) | ((owner != li) & (owner_length < lines[li][3] - lines[li][2]))
+        for sp in line_spans:
+            length = sp.s_to - sp.s_from
+            if length < max(min_span_m, 2 * cover_bin_m):
+                continue
+            near = np.flatnonzero((s >= sp.s_from) & (s <= sp.s_to) & ~taken & open_)
+            across = off[near] - (sp.offset + sp.offset_slope * s[near])
+            dz = pz[near] - catenary(s[near], sp.z0, sp.s0, sp.c)
+            zone = (np.abs(across) >= min_sep_m) & (np.abs(across) <= max_sep_m) & (np.abs(dz) <= max_dz_m)
+            near, across, dz = near[zone], across[zone], dz[zone]
+            n_steps = int(np.ceil(length / cover_bin_m))
+            for _ in range(max_rounds):
+                if len(near) < min_points:
+                    break
+                ia = np.floor(across / bin_m).astype(np.int64)
+                iz = np.floor(dz / bin_m).astype(np.int64)
+                ia -= ia.min()
+                iz -= iz.min()
+                grid = np.zeros((ia.max() + 2, iz.max() + 2))
+                np.add.at(grid, (ia, iz), 1.0)
+                window = grid[:-1, :-1] + grid[1:, :-1] + grid[:-1, 1:] + grid[1:, 1:]
+                ka, kz = np.unravel_index(int(np.argmax(window)), window.shape)
+                if window[ka, kz] < min_points:
+                    break
+                pick = np.flatnonzero((ia >= ka) & (ia <= ka + 1) & (iz >= kz) & (iz <= kz + 1))
+                k = near[pick]
+                ok = False
+                for _refit in range(2):  # the picked points' own catenary and trend, their points again
+                    fit = fit_catenary(s[k], pz[k])
+                    o1, o0 = line_fit(s[k], off[k]) if len(k) >= 3 else (0.0, float(np.median(off[k])))
+                    r_z = np.abs(pz[near] - catenary(s[near], *fit[:3]))
+                    r_o = np.abs(off[near] - o1 * s[near] - o0)
+                    pick = np.flatnonzero((r_z <= max(3 * fit[3], tol_m)) & (r_o <= tol_m))
+                    k = near[pick]
+                    ok = len(k) >= min_points and fit[3] <= max_rms
+                    if not ok:
+                        break
+                cover = len(np.unique(np.floor((s[k] - sp.s_from) / cover_bin_m))) / n_steps if ok else 0.0
+                if (ok and cover >= min_cover and np.ptp(s[k]) >= min_span_m
+                        and fit_catenary(s[k], pz[k])[3] <= max_rms):
+                    found.append((k, li, s[k], off[k]))
+                    taken[k] = True
+                # the window's points leave the search either way: the next round looks elsewhere
+                gone = np.zeros(len(near), bool)
+                gone[pick] = True
+                gone[(ia >= ka) & (ia <= ka + 1) & (iz >= kz) & (iz <= kz + 1)] = True
+                near, across, dz = near[~gone], across[~gone], dz[~gone]
+    return found
+
+
 def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     """The most populous straight run in ``p`` (see straight_wires), its indices sorted along it,
     or None when none reaches ``min_length_m``."""

@@ -110,6 +110,14 @@ def _run(inputs, params, ctx):
         lines, geo, spans = _add_pass(found3, lines, geo, spans, line_of, wire_of_pt, hu, params)
         n_short = len(geo) - n_before
         timings["short_wires_s"] = time.perf_counter() - t
+    n_sibling = 0
+    if params["sibling_wires"]:
+        # a line's phases hang side by side with one sag: beside each span, the points of a phase
+        # too sparse to find alone share one offset across it and one height above its catenary
+        t = time.perf_counter()
+        lines, geo, spans, line_of, wire_of_pt, n_sibling = _sibling_wires(pc, keep, lines, geo, spans, line_of,
+                                                                           wire_of_pt, params, hu, vu)
+        timings["sibling_wires_s"] = time.perf_counter() - t
 
     # candidates the shape test left out that lie on a fitted span are its points too: steep ones
     # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
@@ -251,7 +259,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -375,11 +383,9 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
     """``short_wires`` among the wire-like points ``free`` (indices into ``pc``; ``off_ground``,
     ``steep``, ``wired``: the points off the ground, of structures and of the wires found) as a
     further pass's result for ``_add_pass`` (one conductor and one straight span per run), or None."""
-    import geopandas as gpd
     import numpy as np
-    from shapely.geometry import LineString
 
-    from .core import _span, fit_catenary, short_wires
+    from .core import short_wires
 
     if len(free) < 12 or len(wired) == 0:
         return None
@@ -393,26 +399,110 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
                        params["v_max_m"])
     if not runs:
         return None
-    geo, spans, rows, segs = [], [], [], []
-    line_of = np.full(len(free), -1, np.int64)
-    for li, run in enumerate(runs):
+    lines_xy = []
+    for run in runs:
         q = xyz[run]
-        a = q[0, :2]
-        d = q[-1, :2] - a
+        d = q[-1, :2] - q[0, :2]
         L = float(np.hypot(*d))
-        d = d / max(L, 1e-9)
-        s, off = (q[:, :2] - a) @ d, (q[:, :2] - a) @ np.array([-d[1], d[0]])
+        lines_xy.append((q[0, :2], d / max(L, 1e-9), L, [run]))
+    return _straight_conductors(pc, xyz, lines_xy, hu)
+
+
+def _straight_conductors(pc, xyz, lines_xy, hu):
+    """A further pass's result for ``_add_pass`` from conductors drawn as straight 2D lines, each
+    (anchor, unit direction, length, [indices into ``xyz`` of each of its spans' points]): one
+    catenary per span."""
+    import geopandas as gpd
+    import numpy as np
+    from shapely.geometry import LineString
+
+    from .core import _span, fit_catenary
+
+    geo, spans, rows, segs = [], [], [], []
+    line_of = np.full(len(xyz), -1, np.int64)
+    for li, (a, d, L, pieces) in enumerate(lines_xy):
+        n_points, rms = 0, []
+        for number, run in enumerate(pieces):
+            q = xyz[run]
+            s, off = (q[:, :2] - a) @ d, (q[:, :2] - a) @ np.array([-d[1], d[0]])
+            spans.append(_span(li, 0, number, s, off, fit_catenary(s, q[:, 2])))
+            line_of[run] = li
+            n_points += len(run)
+            rms.append(off)
         geo.append((a, d, 0.0, L))
-        spans.append(_span(li, 0, 0, s, off, fit_catenary(s, q[:, 2])))
-        line_of[run] = li
         g = LineString([a / hu, (a + L * d) / hu])
-        rows.append({"conductor": li, "votes": len(run), "n_points": len(run), "length_m": L,
+        off = np.concatenate(rms)
+        rows.append({"conductor": li, "votes": n_points, "n_points": n_points, "length_m": L,
                      "rms_m": float(np.sqrt(np.mean(off ** 2))),
                      "azimuth_deg": float(np.degrees(np.arctan2(d[0], d[1])) % 180.0), "geometry": g})
         segs.append({"conductor": li, "segment": 0, "length_m": L, "geometry": g})
     lines = {"conductors": gpd.GeoDataFrame(rows, geometry="geometry", crs=pc.crs),
              "conductor_segments": gpd.GeoDataFrame(segs, geometry="geometry", crs=pc.crs)}
     return lines, geo, spans, line_of, np.where(line_of >= 0, 0, -1), 0
+
+
+def _sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+    """``sibling_wires`` beside the fitted spans among the wire-like points ``keep`` (indices
+    into ``pc``; ``line_of``, ``wire_of_pt``: their conductor and wire so far), added as new
+    conductors (pieces beside the spans of one line at one offset make one, a span each). A line
+    whose points a sibling takes for the most part was a stretch of it: it is dropped and the
+    sibling holds its points. Returns (lines, geo, spans, line_of, wire_of_pt, number added)."""
+    import numpy as np
+
+    from .core import sibling_wires
+
+    min_points = 12  # sibling_wires' default: a piece left with fewer is no wire of its own
+    if len(keep) < min_points or not spans:
+        return lines, geo, spans, line_of, wire_of_pt, 0
+    xyz = np.column_stack([pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu])
+    length = np.array([t1 - t0 for (_, _, t0, t1) in geo] + [0.0])
+    found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
+                          params["s_min_m"], owner=line_of, owner_length=length[line_of], min_points=min_points)
+    if not found:
+        return lines, geo, spans, line_of, wire_of_pt, 0
+    taken = np.zeros(len(keep), bool)
+    reach = np.zeros(len(geo) + 1)  # per line: the longest piece that took points of it
+    for k, _, s, _ in found:
+        taken[k] = True
+        reach[line_of[k]] = np.maximum(reach[line_of[k]], np.ptp(s))
+    owners = line_of[taken & (line_of >= 0)]
+    absorbed = {int(li) for li in np.unique(owners)
+                if (owners == li).sum() >= 0.5 * (line_of == li).sum() and length[li] <= reach[li]}
+    searched = list(geo)
+    if absorbed:
+        lines, geo, spans, line_of, wire_of_pt = _keep_conductors(
+            [i for i in range(len(geo)) if i not in absorbed], lines, geo, spans, line_of, wire_of_pt)
+    free = np.flatnonzero(line_of < 0)
+    at = np.full(len(keep), -1, np.int64)
+    at[free] = np.arange(len(free))
+    groups = []  # [parent line, offset at its middle, [pieces], their s and offsets]
+    for k, li, s, off in found:
+        mine = at[k] >= 0  # (points of a line not absorbed stay with it)
+        if mine.sum() < min_points:
+            continue
+        k, s, off = at[k[mine]], s[mine], off[mine]
+        o1, o0 = np.polyfit(s, off, 1)
+        mid = float(np.mean(s))
+        g = next((g for g in groups if g[0] == li and abs(g[1] - (o0 + o1 * mid)) <= params["band_m"]), None)
+        if g is None:
+            groups.append([li, o0 + o1 * mid, [k], [s], [off]])
+        else:
+            g[2].append(k), g[3].append(s), g[4].append(off)
+    lines_xy = []
+    for li, _, pieces, ss, offs in groups:
+        if np.ptp(np.concatenate(ss)) < params["s_min_m"]:
+            continue  # what the lines kept leave of it is shorter than a conductor's run
+        a, d, _, _ = searched[li]  # the parent's frame as searched (dropping absorbed lines renumbers)
+        n = np.array([-d[1], d[0]])
+        s, off = np.concatenate(ss), np.concatenate(offs)
+        o1, o0 = np.polyfit(s, off, 1)
+        ends = [a + t * d + (o0 + o1 * t) * n for t in (float(s.min()), float(s.max()))]
+        L = float(np.hypot(*(ends[1] - ends[0])))
+        lines_xy.append((ends[0], (ends[1] - ends[0]) / max(L, 1e-9), L, pieces))
+    n_before = len(geo)
+    lines, geo, spans = _add_pass(_straight_conductors(pc, xyz[free], lines_xy, hu) if lines_xy else None, lines,
+                                  geo, spans, line_of, wire_of_pt, hu, params)
+    return lines, geo, spans, line_of, wire_of_pt, len(geo) - n_before
 
 
 def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0, with_arms=None,
@@ -490,10 +580,17 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         d = np.array([bx - ax, by - ay]) * hu
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
-    spans, line_of, wire_of_pt = conductors_3d(
-        geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
-        s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
-        ground_z=(pc.z[keep] * vu - hag[keep]))
+    def step_3d(geo):
+        return conductors_3d(
+            geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
+            s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
+            ground_z=(pc.z[keep] * vu - hag[keep]))
+
+    spans, line_of, wire_of_pt = step_3d(geo)
+    lines, geo, turned = _realign(lines, geo, spans, params, hu)
+    if turned:  # the 3D step again along the turned lines (whose bands held other wires' points)
+        spans, line_of, wire_of_pt = step_3d(geo)
+        timings["n_lines_realigned"] = timings.get("n_lines_realigned", 0) + turned
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points,
     # is thin across the line and hangs gently (pylon members, roof edges and a crown's edge are
     # straight in plan but not wires); shorter pieces only add wire points to a conductor that has one
@@ -510,6 +607,69 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
     timings["conductors_3d_s"] = timings.get("conductors_3d_s", 0.0) + time.perf_counter() - t
     return lines, geo, spans, line_of, wire_of_pt, len(th)
+
+
+def _realign(lines, geo, spans, params, hu):
+    """Lines turned onto the plan trend of their wires: the Hough's line through a wire seen from
+    one side (a mobile scanner's view of a line crossing its street) can lean off it by a few
+    tenths of a degree, a drift across its length that its band and its crossings inherit. The
+    trend is the spans' own (their offset's slope along the line, pooled over the spans that fit
+    and are S_min long, each weighted by its precision); a line turns about the middle of its
+    spans where that trend drifts more than band_m over the line's length (its band loses the
+    wire at one end), lies more than three standard errors off zero and its spans agree on it
+    (a line bending at a support, or wires fanning out from a pole, keep the Hough's compromise).
+    Returns (lines, geo, number turned)."""
+    import numpy as np
+    from shapely.geometry import LineString
+
+    from .core import WIRE_LATERAL_RMS_M
+
+    pooled = {}  # line -> [(weight of its slope, slope, middle, offset there, points)] per span
+    for sp in spans:
+        length = sp.s_to - sp.s_from
+        if sp.rms <= params["max_rms_3d_m"] and length >= params["s_min_m"] and sp.offset_rms <= WIRE_LATERAL_RMS_M:
+            # 1 / var(slope) of a least-squares line through n points spread evenly over the span
+            w = sp.n_points * length ** 2 / 12.0 / max(sp.offset_rms, 0.01) ** 2
+            mid = 0.5 * (sp.s_from + sp.s_to)
+            pooled.setdefault(sp.conductor, []).append((w, sp.offset_slope, mid, sp.offset + sp.offset_slope * mid,
+                                                        sp.n_points))
+    turn = {}
+    for li, rows in pooled.items():
+        w, slope, mid, off, n = map(np.array, zip(*rows))
+        trend = float(w @ slope / w.sum())
+        agree = w @ (slope - trend) ** 2 <= 9.0 * max(len(w) - 1, 1)  # no bend at a support, no fan of wires
+        if abs(trend) * (geo[li][3] - geo[li][2]) > params["band_m"] and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
+            pivot = float(w @ mid / w.sum())
+            # the line moves onto its wire there: the offset most of its points share (another
+            # line's wire its lean let into the band is out-numbered)
+            at = off + trend * (pivot - mid)
+            order = np.argsort(at)
+            turn[li] = (trend, pivot, float(at[order][np.searchsorted(np.cumsum(n[order]), 0.5 * n.sum())]))
+    if not turn:
+        return lines, geo, 0
+    geo = list(geo)
+    cond, seg = lines["conductors"].copy(), lines["conductor_segments"].copy()
+    for li, (slope, mid, off) in turn.items():
+        a, d, t0, t1 = geo[li]
+        n = np.array([-d[1], d[0]])
+        pivot = a + mid * d
+        d2 = d + slope * n
+        d2 = d2 / np.hypot(*d2)
+        centre = pivot + off * n
+        geo[li] = (centre - mid * d2, d2, t0, t1)
+
+        def onto(xy):  # the layers follow: each end keeps its place along the line
+            s = float((np.asarray(xy) * hu - pivot) @ d)
+            return tuple((centre + s * d2) / hu)
+        row = cond.index[li]
+        cond.loc[row, "geometry"] = LineString([onto(c) for c in cond.loc[row, "geometry"].coords])
+        if "azimuth_deg" in cond.columns:
+            cond.loc[row, "azimuth_deg"] = float(np.degrees(np.arctan2(d2[0], d2[1])) % 180.0)
+        for k in seg.index[seg["conductor"] == li]:
+            seg.loc[k, "geometry"] = LineString([onto(c) for c in seg.loc[k, "geometry"].coords])
+    for g, src in ((cond, lines["conductors"]), (seg, lines["conductor_segments"])):
+        g.attrs.update(src.attrs)
+    return {**lines, "conductors": cond, "conductor_segments": seg}, geo, len(turn)
 
 
 def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None) -> set:
@@ -723,14 +883,17 @@ def toolbox_algorithms():
             "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart; "
             "pieces between cuts or occlusions from S_min / 2); V_max is the method's 2.5 m unless a first pass "
             "finds the wires sampled sparser than 10 points per 2.5 m, then 10 x their median point spacing "
-            "(v_max_m_used, wire_spacing_m); a short first-pass line along a line twice its length is folded "
+            "(v_max_m_used, wire_spacing_m); a 2D line whose spans agree it leans off their wire by more than "
+            "band_m over its length is turned onto their trend and searched again (n_lines_realigned); a short "
+            "first-pass line along a line twice its length is folded "
             "into it; a conductor holds a span of S_min that fits, hangs "
             "gently and is thin across the line (lateral rms <= 0.15 m); the wire-like points left on no wire are "
             "searched once more (second_pass: a line's stretch past a bend; a line along one found already is folded "
             "into it), and what is still left for "
             "straight 3D runs of S_min / 2 (short_wires: a mobile scan's wires across the street, fanning from "
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
-            "cross-section; n_short_wires); each span's catenary continued past its ends takes the wire where the "
+            "cross-section; n_short_wires), and beside each fitted span for a phase too sparse to find alone "
+            "(sibling_wires, n_sibling_wires); each span's catenary continued past its ends takes the wire where the "
             "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), the wire "
             "across a found tower's footprint being the tower's; a wire point farther across its span's plan trend "
             "than 3 robust sigma (at least 0.05 m) with other points off the ground within 0.3 m is foliage the "
@@ -798,6 +961,9 @@ def toolbox_algorithms():
             Parameter("short_wires", bool, True, "search what is left for straight 3D runs of wire-like points "
                       "S_min / 2 long: wires seen over a few metres only (a mobile scan's wires across the street) "
                       "that the 2D Hough's S_min misses"),
+            Parameter("sibling_wires", bool, True, "search beside each fitted span (band_m to 4 m across, 3 m up "
+                      "or down) for a phase too sparse to find alone: points at one offset across it and one height "
+                      "above its catenary, a catenary of their own over half the span or more"),
             Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
                       "points on it (within 0.25 m in plan and the fit's tolerance, no gap over 2 x v_max_m, up to "
                       "2 x s_min_m): a wire under the height window or next to a tower"),
