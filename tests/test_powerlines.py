@@ -16,7 +16,7 @@ from toolbox.crossings import crossings
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, fit_catenary, line_fit,
+from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, conductors_3d, fit_catenary, line_fit,
                                              local_surface_density, parabola_fit, peel_catenaries, shape_classes,
                                              span_on_surface, split_spans)
 from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
@@ -315,6 +315,35 @@ def test_peel_separates_stacked_wires_and_leaves_crowns():
     assert got == {0, 1, 2, 3}
     # the crown alone: points lined up in (s, z) by chance are not thin across the band
     assert peel_catenaries(crown[:, 0], crown[:, 1], crown[:, 2], 20, 8.0, 0.2, 5.0) == []
+
+
+def test_the_3d_step_on_some_lines_gives_what_the_whole_run_gives_them():
+    """The realignment re-runs the 3D step on the lines whose bands changed only (``only``): a
+    line's spans and wire points must be those of a run over every line."""
+    rng = np.random.default_rng(5)
+    xs, ys, zs = [], [], []
+    lines = []
+    for k, (y0, heading) in enumerate([(0.0, 0.0), (1.0, 0.3), (8.0, -0.5), (30.0, 20.0)]):
+        d = np.array([np.cos(np.radians(heading)), np.sin(np.radians(heading))])
+        a = np.array([0.0, y0])
+        lines.append((a, d, 0.0, 80.0))
+        for z0 in (12.0, 15.0):  # two wires per line
+            t = rng.uniform(0, 80, 300)
+            xy = a + t[:, None] * d + rng.normal(0, 0.03, (300, 2))
+            xs.append(xy[:, 0]), ys.append(xy[:, 1])
+            zs.append(catenary(t, z0, 40.0, 800.0) + rng.normal(0, 0.03, 300))
+    clutter = rng.uniform([0, -2, 5], [80, 10, 18], (400, 3))  # crowns in the bands
+    px, py, pz = np.r_[np.concatenate(xs), clutter[:, 0]], np.r_[np.concatenate(ys), clutter[:, 1]], \
+        np.r_[np.concatenate(zs), clutter[:, 2]]
+    kw = dict(band=0.4, z_link=1.0, s_link=5.0, min_span=10.0, max_rms=0.2)
+    spans, line_of, wire_of = conductors_3d(lines, px, py, pz, **kw)
+    only = {1, 3}
+    some, some_line, some_wire = conductors_3d(lines, px, py, pz, only=only, **kw)
+    assert len(spans) > len(some) > 0 and {sp.conductor for sp in some} <= only
+    assert some == [sp for sp in spans if sp.conductor in only]
+    mine = np.isin(line_of, list(only))
+    assert (some_line[mine] == line_of[mine]).all() and (some_wire[mine] == wire_of[mine]).all()
+    assert (some_line[~np.isin(some_line, list(only))] == -1).all()
 
 
 def _bundle(rng, offsets, per_m=4.0, length=60.0, c=900.0, noise=0.03):

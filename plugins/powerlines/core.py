@@ -442,8 +442,9 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
                   min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
-                  ground_z=None, peel: bool = True, min_piece: float | None = None):
-    """Wires and their catenary spans along each 2D line.
+                  ground_z=None, peel: bool = True, min_piece: float | None = None, only=None):
+    """Wires and their catenary spans along each 2D line (of those in ``only``, if given: a line's
+    result depends on the points ``band_owner`` gives it and nothing else).
 
     ``lines``: [(anchor, direction, t_from, t_to)]; p*: candidate 3D points; ``ground_z``: the
     ground's height under each (optional: links heights about its slope along the line). Returns
@@ -466,20 +467,12 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     spans: list[Span] = []
     line_of = np.full(len(px), -1, np.int64)
     wire_of_point = np.full(len(px), -1, np.int64)
-    # each point belongs to the nearest 2D line that reaches it (bands of neighbouring lines overlap)
-    owner = np.full(len(px), -1)
-    best = np.full(len(px), np.inf)
-    for li, (anchor, direction, t0, t1) in enumerate(lines):
-        normal = np.array([-direction[1], direction[0]])
-        d = np.abs((px - anchor[0]) * normal[0] + (py - anchor[1]) * normal[1])
-        along = (px - anchor[0]) * direction[0] + (py - anchor[1]) * direction[1]
-        beyond = np.maximum(np.maximum(t0 - along, along - t1), 0.0)
-        score = np.where(beyond <= reach, d, np.inf)
-        closer = score < best
-        owner[closer], best[closer] = li, score[closer]
+    owner = band_owner(lines, px, py, band, reach)
     for li, (anchor, direction, _, _) in enumerate(lines):
+        if only is not None and li not in only:
+            continue
         normal = np.array([-direction[1], direction[0]])
-        cand = np.flatnonzero((owner == li) & (best <= band))  # within the band and the line's reach
+        cand = np.flatnonzero(owner == li)
         if len(cand) < min_points:
             continue
         d = np.column_stack([px[cand], py[cand]]) - anchor
@@ -567,6 +560,24 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                 good.append(spans[-1])
         _pick_up(li, good, cand, s, z, off, line_of, wire_of_point)
     return spans, line_of, wire_of_point
+
+
+def band_owner(lines, px, py, band: float, reach: float) -> np.ndarray:
+    """Per point, the 2D line whose band holds it (-1: none): the nearest line that reaches it,
+    ``reach`` past the ends of its extent, if within ``band`` of it (bands of neighbouring lines
+    overlap)."""
+    owner = np.full(len(px), -1)
+    best = np.full(len(px), np.inf)
+    for li, (anchor, direction, t0, t1) in enumerate(lines):
+        normal = np.array([-direction[1], direction[0]])
+        d = np.abs((px - anchor[0]) * normal[0] + (py - anchor[1]) * normal[1])
+        along = (px - anchor[0]) * direction[0] + (py - anchor[1]) * direction[1]
+        beyond = np.maximum(np.maximum(t0 - along, along - t1), 0.0)
+        score = np.where(beyond <= reach, d, np.inf)
+        closer = score < best
+        owner[closer], best[closer] = li, score[closer]
+    owner[best > band] = -1
+    return owner
 
 
 def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:

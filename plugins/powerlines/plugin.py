@@ -554,7 +554,7 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
 
     import numpy as np
 
-    from .core import WIRE_LATERAL_RMS_M, conductors_3d
+    from .core import WIRE_LATERAL_RMS_M, band_owner, conductors_3d
 
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     t = time.perf_counter()
@@ -580,16 +580,28 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         d = np.array([bx - ax, by - ay]) * hu
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
-    def step_3d(geo):
+    px, py = pc.x[keep] * hu, pc.y[keep] * hu
+
+    def step_3d(geo, only=None):
         return conductors_3d(
-            geo, pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
+            geo, px, py, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
             s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
-            ground_z=(pc.z[keep] * vu - hag[keep]))
+            ground_z=(pc.z[keep] * vu - hag[keep]), only=only)
 
     spans, line_of, wire_of_pt = step_3d(geo)
+    before = geo
     lines, geo, turned = _realign(lines, geo, spans, params, hu)
-    if turned:  # the 3D step again along the turned lines (whose bands held other wires' points)
-        spans, line_of, wire_of_pt = step_3d(geo)
+    if turned:
+        # the 3D step again along the lines whose band's points changed: the turned ones and
+        # their neighbours (a line's result depends on its band's points alone)
+        was = band_owner(before, px, py, params["band_3d_m"], params["band_3d_m"])
+        now = band_owner(geo, px, py, params["band_3d_m"], params["band_3d_m"])
+        redo = {int(li) for li in np.unique(np.r_[was[was != now], now[was != now]]) if li >= 0}
+        redo |= {li for li in range(len(geo)) if geo[li] is not before[li]}
+        new_spans, new_line, new_wire = step_3d(geo, only=redo)
+        spans = sorted([sp for sp in spans if sp.conductor not in redo] + new_spans, key=lambda sp: sp.conductor)
+        mine = np.isin(now, list(redo)) | np.isin(was, list(redo))
+        line_of[mine], wire_of_pt[mine] = new_line[mine], new_wire[mine]
         timings["n_lines_realigned"] = timings.get("n_lines_realigned", 0) + turned
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points,
     # is thin across the line and hangs gently (pylon members, roof edges and a crown's edge are
