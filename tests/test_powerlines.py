@@ -645,6 +645,35 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
     assert _arms(cond3, [big], 1.0, with_arms=held, own_only=True) == {2} and held == [0]
 
 
+def test_a_tower_stands_under_its_lines_and_a_tree_beside_them_does_not():
+    """Where wires lost in a crown end, the tree beside the line looks like a tower (a tall column
+    where spans end); a tower stands under its conductors: under one, between them, or with its
+    arms reaching over them."""
+    from toolbox_plugins.powerlines.core import _under_its_lines
+
+    def square(cx, cy, half):  # footprint cell centres, 1 m cells
+        g = np.arange(-half + 0.5, half, 1.0)
+        return np.array([(cx + x, cy + y) for x in g for y in g])
+
+    def lines(*offsets, length=200.0):  # conductors along x, at these y
+        return [(np.array([0.0, y]), np.array([length, y])) for y in offsets]
+
+    args = dict(margin_m=10.0, under_line_m=2.0, max_side_ratio=2.0, cell_m=1.0)
+    # a pole or a tower with its earth wire over its body
+    assert _under_its_lines(100.0, 0.5, square(100, 0.5, 1), lines(0.0, 1.2, -1.4), **args)
+    # a double circuit's tower seen from a street: its footprint short of the wires, between them
+    assert _under_its_lines(100.0, 0.0, square(100, 0, 2), lines(6.6, 7.2, -6.8, -7.4), **args)
+    # one circuit strung on one side: the arms reach over it
+    assert _under_its_lines(100.0, 0.0, square(100, 0, 7), lines(6.6, 7.2), **args)
+    # a tree 6 m beside the line, its crown 2 m from the nearest wire; another line far on the other side
+    assert not _under_its_lines(100.0, -6.2, square(100, -6.2, 2), lines(0.0, -1.2, -2.4), **args)
+    assert not _under_its_lines(100.0, -6.2, square(100, -6.2, 2), lines(0.0, -1.2, -2.4, 75.0), **args)
+    # a line ending 5 m short of it is still its line; one ending 15 m short is not, and with no
+    # line along it there is no evidence against it
+    assert not _under_its_lines(100.0, -6.2, square(100, -6.2, 2), lines(0.0, length=95.0), **args)
+    assert _under_its_lines(100.0, -6.2, square(100, -6.2, 2), lines(0.0, length=85.0), **args)
+
+
 def _pole_points(rng, x, y, height_m, radius_m=0.15, per_m=60):
     """A pole's surface as a street scanner sees it: the half facing the road, from 0.3 m up."""
     n = int(height_m * per_m)

@@ -1341,7 +1341,8 @@ class Pylon:
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
                 reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
                 end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
-                max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None):
+                max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
+                under_line_m: float = 2.0, max_side_ratio: float = 2.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -1365,6 +1366,12 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     cells (the body; the arms reach out across the line). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell).
+
+    A tower stands under the lines it carries: its base within ``under_line_m`` of a conductor in
+    plan (an earth wire over its body, a pole's top insulator), or between conductors, the farther
+    side's nearest at most ``max_side_ratio`` times as far as the nearer side's, or its footprint
+    (the arms) reaching within a cell of one. A tree beside the line, where wires lost in its crown
+    end, has them all on one side, clear of it.
     """
     from scipy import ndimage
 
@@ -1451,6 +1458,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         height = max(height, float(np.max(span_end_hag[owner == k])))
         standing = structure & (top >= 0.5 * height)  # legs and body reach up to the head; bushes do not
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
+        if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
+                                               max_side_ratio, cell_m):
+            continue
         (passed_by if passed else found).append(
             Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                   (x0, y0, cell_m, rows, cols)))
@@ -1591,6 +1601,33 @@ def _passes(px, py, a, b, reach, margin):
         return False
     t = ((px - a[0]) * d[0] + (py - a[1]) * d[1]) / L
     return margin < t < L - margin and abs((px - a[0]) * d[1] - (py - a[1]) * d[0]) / L <= reach
+
+
+def _under_its_lines(cx, cy, footprint, lines_xy, margin_m, under_line_m, max_side_ratio, cell_m) -> bool:
+    """Whether a tower candidate at (cx, cy), footprint cell centres ``footprint``, stands under
+    the conductors ``lines_xy`` that reach within ``margin_m`` of it along their length (see
+    find_pylons)."""
+    left, right, reach = np.inf, np.inf, np.inf
+    for a, b in lines_xy:
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        L = float(np.hypot(*(b - a)))
+        if L == 0:
+            continue
+        u = (b - a) / L
+        n = np.array([-u[1], u[0]])
+        t = (cx - a[0]) * u[0] + (cy - a[1]) * u[1]
+        if not -margin_m <= t <= L + margin_m:
+            continue
+        off = (cx - a[0]) * n[0] + (cy - a[1]) * n[1]
+        if off >= 0:
+            left = min(left, off)
+        else:
+            right = min(right, -off)
+        reach = min(reach, float(np.abs((footprint - a) @ n).min()))
+    near, far = min(left, right), max(left, right)
+    if not np.isfinite(near):  # no conductor along it to tell
+        return True
+    return near <= under_line_m or far <= max_side_ratio * near or reach <= cell_m
 
 
 def _point_segment_distance(px, py, a, b):
