@@ -16,7 +16,8 @@ from toolbox.crossings import crossings
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, conductors_3d, fit_catenary, line_fit,
+from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, conductors_3d, fit_catenary, kink_cut,
+                                             line_fit,
                                              local_surface_density, parabola_fit, peel_catenaries, shape_classes,
                                              span_on_surface, split_spans)
 from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
@@ -285,6 +286,24 @@ def test_a_span_climbing_from_a_pole_is_cut_there_and_a_slack_wire_is_not():
     assert len(cuts) == 1 and cuts[0] == pytest.approx(60.0, abs=3.0)
     slack = catenary(s, 10.0, 50.0, 150.0) + rng.normal(0, 0.03, len(s))
     assert split_spans(s, slack, 8.0) == []
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_wire_run_through_a_tower_uncut_is_cut_where_two_catenaries_meet(seed):
+    """Two 60 m spans of one wire whose tower hides it over 10 m: cut at the tower within a metre;
+    one span, a 300 m span and a span climbing a hillside are not cut, nor are two spans that do
+    not meet (two wires)."""
+    rng = np.random.default_rng(seed)
+    s = np.sort(rng.uniform(0, 120, 400))
+    s = s[np.abs(s - 60) > 5]
+    two = np.where(s < 60, catenary(s, 10, 30, 1000), catenary(s, 10, 90, 1000)) + rng.normal(0, 0.03, len(s))
+    assert abs(kink_cut(s, two, 20.0) - 60.0) <= 1.0
+    assert kink_cut(s, catenary(s, 10, 60, 1000) + rng.normal(0, 0.03, len(s)), 20.0) is None
+    assert kink_cut(s, catenary(s, 10, -40, 800) + rng.normal(0, 0.03, len(s)), 20.0) is None
+    long = np.sort(rng.uniform(0, 300, 900))
+    assert kink_cut(long, catenary(long, 10, 150, 1500) + rng.normal(0, 0.05, len(long)), 20.0) is None
+    apart = np.where(s < 60, catenary(s, 10, 30, 1000), catenary(s, 11, 90, 1000)) + rng.normal(0, 0.03, len(s))
+    assert kink_cut(s, apart, 20.0) is None
 
 
 def test_peel_separates_stacked_wires_and_leaves_crowns():

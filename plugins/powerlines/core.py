@@ -440,6 +440,62 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
     return sorted(cuts)
 
 
+def kink_cut(s, z, min_span: float, step_m: float = 1.0, min_gain: float = 1.5, min_drop: float = 0.02):
+    """Where along a piece of wire that one catenary fits, two fit it markedly better: an
+    attachment the wire runs through that ``split_spans``' slope windows missed (a suspension
+    tower hiding the wire's points; 60 m spans' small kinks). Parabolas (a catenary's first-order form) left and
+    right of each cut ``step_m`` apart, at least ``min_span`` from the ends; the best cut counts
+    when it lowers the rms ``min_gain`` times, the slope drops there by ``min_drop`` (rising into
+    it, falling after it: a catenary's slope only grows) and both sides meet there (within 3 of
+    their rms: one wire, attached). Returns the cut or None."""
+    if s.max() - s.min() < 2 * min_span or len(s) < 12:
+        return None
+    order = np.argsort(s)
+    s, z = s[order], z[order]
+    centre, half = 0.5 * (s[0] + s[-1]), 0.5 * (s[-1] - s[0])
+    u = (s - centre) / half  # conditioning: in [-1, 1]
+    pos = centre + step_m * np.arange(-np.floor((half - min_span) / step_m), np.floor((half - min_span) / step_m) + 1)
+    k = np.searchsorted(s, pos)
+    pw = np.column_stack([u ** i for i in range(5)])  # u^0..u^4
+    pz = np.column_stack([z * u ** i for i in range(3)])  # z u^0..u^2
+    cp = np.vstack([np.zeros((1, 5)), np.cumsum(pw, axis=0)])
+    cz = np.vstack([np.zeros((1, 3)), np.cumsum(pz, axis=0)])
+    cz2 = np.r_[0.0, np.cumsum(z * z)]
+
+    def fits(i, j):  # parabola coefficients and SSE over the index ranges [i, j)
+        m = cp[j] - cp[i]
+        A = np.stack([m[:, 0:3], m[:, 1:4], m[:, 2:5]], axis=1)
+        b = cz[j] - cz[i]
+        ok = (j - i) >= 6
+        A[~ok] = np.eye(3)
+        with np.errstate(all="ignore"):
+            coef = np.linalg.solve(A, b[..., None])[..., 0]
+        sse = (cz2[j] - cz2[i]) - np.einsum("ij,ij->i", coef, b)
+        return coef, np.where(ok, np.maximum(sse, 0.0), np.inf)
+
+    n = len(s)
+    _, sse1 = fits(np.array([0]), np.array([n]))
+    cl, sl = fits(np.zeros_like(k), k)
+    cr, sr = fits(k, np.full_like(k, n))
+    sse2 = sl + sr
+    best = int(np.argmin(sse2))
+    if not np.isfinite(sse2[best]) or sse2[best] * min_gain ** 2 > sse1[0]:
+        return None
+    # cuts in one gap split the points alike: the attachment is where the two sides meet
+    same = np.flatnonzero(k == k[best])
+    ub = (pos[same] - centre) / half
+    basis = np.column_stack([np.ones_like(ub), ub, ub * ub])
+    gap = np.abs(basis @ cl[best] - basis @ cr[best])
+    at = int(np.argmin(gap))
+    ub = ub[at]
+    slope_l = (cl[best][1] + 2 * cl[best][2] * ub) / half
+    slope_r = (cr[best][1] + 2 * cr[best][2] * ub) / half
+    rms2 = np.sqrt(sse2[best] / n)
+    if slope_l - slope_r < min_drop or gap[at] > 3 * rms2:
+        return None
+    return float(pos[same[at]])
+
+
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
                   min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
                   ground_z=None, peel: bool = True, min_piece: float | None = None, only=None):
@@ -543,6 +599,11 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                     if finer:
                         edges = [lo_s] + finer + [hi_s]
                         pieces = list(zip(edges[:-1], edges[1:])) + pieces
+                        continue
+                if hi_s - lo_s >= 2 * min_span:
+                    cut = kink_cut(sk[sel], zk[sel], min_span)
+                    if cut is not None:  # two spans, one attachment between them
+                        pieces = [(lo_s, cut), (cut, hi_s)] + pieces
                         continue
                 emit(np.flatnonzero(sel), wire, fit)
         good = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
