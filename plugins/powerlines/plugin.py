@@ -84,6 +84,7 @@ def _run(inputs, params, ctx):
         # a sparser survey than the method's samples its wires with gaps over V_max every few
         # spans, and each such gap cuts a run: the gap allowed scales with the measured spacing
         params["v_max_m"] = round(GAP_SPACINGS * spacing, 2)
+        timings.pop("n_lines_realigned", None)  # the lines of the run kept are the ones counted
         lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx,
                                                                         timings)
     lines, geo, spans, line_of, wire_of_pt = _fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params)
@@ -94,7 +95,10 @@ def _run(inputs, params, ctx):
         # is mostly clutter, so a line found there must be mostly wire (half its span points on
         # catenaries that fit)
         t = time.perf_counter()
-        found2 = _lines_and_wires(pc, free, hag, cell_used, params, ctx, {}, min_fit_share=0.5, optional=True)
+        counts = {}  # its stage times are second_pass_s; its turned lines count with the first's
+        found2 = _lines_and_wires(pc, free, hag, cell_used, params, ctx, counts, min_fit_share=0.5, optional=True)
+        if found2 is not None:
+            timings["n_lines_realigned"] = timings.get("n_lines_realigned", 0) + counts.get("n_lines_realigned", 0)
         lines, geo, spans = _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params)
         timings["second_pass_s"] = time.perf_counter() - t
     n_short = 0
@@ -421,17 +425,17 @@ def _straight_conductors(pc, xyz, lines_xy, hu):
     geo, spans, rows, segs = [], [], [], []
     line_of = np.full(len(xyz), -1, np.int64)
     for li, (a, d, L, pieces) in enumerate(lines_xy):
-        n_points, rms = 0, []
+        n_points, offs = 0, []
         for number, run in enumerate(pieces):
             q = xyz[run]
             s, off = (q[:, :2] - a) @ d, (q[:, :2] - a) @ np.array([-d[1], d[0]])
             spans.append(_span(li, 0, number, s, off, fit_catenary(s, q[:, 2])))
             line_of[run] = li
             n_points += len(run)
-            rms.append(off)
+            offs.append(off)
         geo.append((a, d, 0.0, L))
         g = LineString([a / hu, (a + L * d) / hu])
-        off = np.concatenate(rms)
+        off = np.concatenate(offs)
         rows.append({"conductor": li, "votes": n_points, "n_points": n_points, "length_m": L,
                      "rms_m": float(np.sqrt(np.mean(off ** 2))),
                      "azimuth_deg": float(np.degrees(np.arctan2(d[0], d[1])) % 180.0), "geometry": g})
