@@ -706,6 +706,8 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
         ls, lz, lo_ = s[left], z[left], off[left]
         tri = np.sort(rng.integers(0, len(left), (n_samples, 3)), axis=1)
         tri[n_samples // 2:] = _local_triples(ls, lz, n_samples - n_samples // 2, min_span, max_slope, rng)
+        # each triple in order along the line (the points come in the survey's order, not along it)
+        tri = np.take_along_axis(tri, np.argsort(ls[tri], axis=1, kind="stable"), axis=1)
         s1, s2, s3 = (ls[tri[:, i]] for i in range(3))
         z1, z2, z3 = (lz[tri[:, i]] for i in range(3))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -1177,6 +1179,90 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
                 best[taken[better]] = r[better]
                 line_of[taken[better]], wire_of[taken[better]] = li, sp.wire
     return line_of, wire_of
+
+
+def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float, min_span_m: float,
+               min_points: int = 12, lateral_m: float = 0.3, max_step_m: float = 0.5, max_rise_m: float = 3.0,
+               min_contrast: float = 4.0, max_rounds: int = 4) -> list:
+    """The spans of a found wire beyond its last one: past a support the wire hangs on in a new
+    catenary that ``grow_span_ends`` (the old one continued) leaves, and where the survey sees it
+    sparsely among crowns (a mobile scan's wire past the last pole it passes) the shape test and
+    the Hough have too few of its points.
+
+    From each end of each wire's outermost span that fits (rms <= ``max_rms``), the points ``p*``
+    (off the ground, metres; ``free``: on no wire yet) within ``lateral_m`` of its plan trend
+    continued, up to ``reach_m`` on and ``max_rise_m`` up or down from its end height, are
+    searched for catenaries (``peel_catenaries``: thin, gentle, ``min_span_m`` long, no gap over
+    ``max_gap_m``). One is that wire's next span when it starts within ``max_gap_m`` of the end,
+    meets the end within ``max_step_m`` in height (they hang on the same support), and is a
+    concentration of points (within 0.1 m of it ``min_contrast`` times denser than 0.2-0.5 m
+    around, among all ``p*``: a crown's points lined up are not). Its far end is searched again,
+    up to ``max_rounds`` spans on. ``lines`` as for conductors_3d.
+    Returns [(line, wire, indices into p*, s, offsets across, fit)] per span found."""
+    found = []
+    taken = ~np.asarray(free, bool).copy()
+    tree = None
+    for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
+        for wire in sorted({sp.wire for sp in line_spans}):
+            mine = [sp for sp in line_spans if sp.wire == wire]
+            for sign in (1.0, -1.0):
+                sp = max(mine, key=lambda q: sign * (q.s_to if sign > 0 else q.s_from))
+                end = sp.s_to if sign > 0 else sp.s_from
+                z_end = float(catenary(end, sp.z0, sp.s0, sp.c))
+                o0, o1 = sp.offset, sp.offset_slope
+                for _ in range(max_rounds):
+                    out = sign * (s - end)
+                    zone = np.flatnonzero((out > 0) & (out <= reach_m) & ~taken &
+                                          (np.abs(off - o0 - o1 * s) <= lateral_m) & (np.abs(pz - z_end) <= max_rise_m))
+                    if len(zone) < min_points:
+                        break
+                    hit = None
+                    for part, fit in peel_catenaries(s[zone], pz[zone], off[zone], min_points, min_span_m, max_rms,
+                                                     gap_m=max_gap_m):
+                        k = zone[part]
+                        near = float(np.min(sign * (s[k] - end)))
+                        step = abs(float(catenary(end, *fit[:3])) - z_end)
+                        if near > max_gap_m or step > max_step_m:
+                            continue
+                        if tree is None:
+                            tree = cKDTree(np.column_stack([px, py, pz]))
+                        if _contrast(tree, k, s, off, pz, fit) < min_contrast:
+                            continue
+                        if hit is None or near < hit[2]:
+                            hit = (k, fit, near)
+                    if hit is None:
+                        break
+                    k, fit, _ = hit
+                    for _refit in range(3):
+                        # the span's points along its own trend and catenary (past a support a wire
+                        # turns a little, and the end's trend continued loses it across a long span)
+                        o1, o0 = line_fit(s[k], off[k])
+                        more = np.flatnonzero((sign * (s - end) > 0) & (sign * (s - end) <= reach_m) & ~taken &
+                                              (np.abs(off - o0 - o1 * s) <= lateral_m) &
+                                              (np.abs(pz - catenary(s, *fit[:3])) <= max(3 * fit[3], 0.15)))
+                        run = _longest_run(s, more, max_gap_m)
+                        if len(run) <= len(k) or not np.isin(k, run).all():
+                            break
+                        k, fit = run, fit_catenary(s[run], pz[run])
+                    o1, o0 = line_fit(s[k], off[k])  # the next search follows this span's own trend
+                    found.append((li, wire, k, s[k], off[k], fit))
+                    taken[k] = True
+                    end = float(s[k].max() if sign > 0 else s[k].min())
+                    z_end = float(catenary(end, *fit[:3]))
+    return found
+
+
+def _contrast(tree, k, s, off, z, fit) -> float:
+    """How much denser the points of ``tree`` (all the points, at ``s`` along the line, ``off``
+    across it, height ``z``) are within 0.1 m of the span of the points ``k`` (its catenary
+    ``fit``, its own plan trend) than 0.2-0.5 m around it, per unit of cross-section area: a wire
+    is a concentration of points, a crown's points lined up are not."""
+    o1, o0 = line_fit(s[k], off[k])
+    near = np.unique(np.concatenate(tree.query_ball_point(tree.data[k], 0.5)))
+    near = near[(s[near] >= s[k].min()) & (s[near] <= s[k].max())]
+    r = np.hypot(off[near] - o0 - o1 * s[near], z[near] - catenary(s[near], *fit[:3]))
+    core, ring = int((r <= 0.1).sum()), int(((r > 0.2) & (r <= 0.5)).sum())
+    return (core / 0.01) / max(ring / (0.25 - 0.04), 1e-9)
 
 
 def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, clutter_xyz=None,

@@ -156,12 +156,32 @@ def _run(inputs, params, ctx):
     # a conductor in a surface is a roof's scan row or an eave seen from the street; one in a
     # volume, points of a crown that line up
     t = time.perf_counter()
+    crowded = []
     not_wires = _not_wires(spans, geo, pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu, params["max_rms_3d_m"],
-                           below=(pc.x[off] * hu, pc.y[off] * hu, pc.z[off] * vu))
+                           below=(pc.x[off] * hu, pc.y[off] * hu, pc.z[off] * vu), crowded=crowded)
+    fitting = {k for k, sp in enumerate(spans) if sp.rms <= params["max_rms_3d_m"]}
+    # a line whose every span is so is none (its spans' pooled contrast may pass on a few dense ones)
+    not_wires |= {li for li in {spans[k].conductor for k in crowded}
+                  if all(k in crowded for k in fitting if spans[k].conductor == li)}
+    crowded = [spans[k] for k in crowded if spans[k].conductor not in not_wires]
+    n_crowded = len(crowded)
     timings["not_wires_s"] = time.perf_counter() - t
     if not_wires:
         kept = [i for i in range(len(geo)) if i not in not_wires]
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
+    if crowded:
+        # a span no denser than around it, on a line that holds wires: crown points lined up beside them
+        spans, line_of, wire_of_pt = _drop_spans(crowded, spans, geo, pc.x[keep] * hu, pc.y[keep] * hu, line_of,
+                                                 wire_of_pt)
+    n_next = 0
+    if params["next_spans"] and spans:
+        # past its last support a wire hangs in a new catenary; seen sparsely among crowns, the
+        # shape test and the Hough had too few of its points
+        t = time.perf_counter()
+        low = off[hag[off] >= 1.0]
+        lines, geo, spans, keep, line_of, wire_of_pt, n_next = _next_spans(pc, low, keep, lines, geo, spans, line_of,
+                                                                         wire_of_pt, params, hu, vu)
+        timings["next_spans_s"] = time.perf_counter() - t
 
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
     # footprint is one of its arms, not a conductor
@@ -263,7 +283,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -509,6 +529,51 @@ def _sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu,
     return lines, geo, spans, line_of, wire_of_pt, len(geo) - n_before
 
 
+def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+    """``next_spans`` of the wires found among the points ``low`` (indices into ``pc``: off the
+    ground), added as spans of those wires; their points join ``keep`` (relabelled where they are
+    candidates on no wire) and each conductor's 2D line is stretched over its new spans.
+    Returns (lines, geo, spans, keep, line_of, wire_of_pt, number of spans added)."""
+    import numpy as np
+    from shapely.geometry import LineString
+
+    from .core import _span, next_spans
+
+    free = ~np.isin(low, keep[line_of >= 0])
+    found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
+                       max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
+                       min_span_m=params["s_min_m"])
+    if not found:
+        return lines, geo, spans, keep, line_of, wire_of_pt, 0
+    spans, geo = list(spans), list(geo)
+    number = {}
+    for sp in spans:
+        number[(sp.conductor, sp.wire)] = max(number.get((sp.conductor, sp.wire), -1), sp.span)
+    pos = np.full(len(pc), -1, np.int64)
+    pos[keep] = np.arange(len(keep))
+    cond = lines["conductors"].copy()
+    for li, wire, k, s, off, fit in found:
+        number[(li, wire)] += 1
+        spans.append(_span(li, wire, number[(li, wire)], s, off, fit, z=pc.z[low[k]] * vu))
+        pts = low[k]
+        at = pos[pts]
+        line_of[at[at >= 0]], wire_of_pt[at[at >= 0]] = li, wire
+        new = pts[at < 0]
+        pos[new] = len(keep) + np.arange(len(new))
+        keep = np.r_[keep, new]
+        line_of, wire_of_pt = np.r_[line_of, np.full(len(new), li)], np.r_[wire_of_pt, np.full(len(new), wire)]
+        a, d, t0, t1 = geo[li]
+        t0, t1 = min(t0, float(s.min())), max(t1, float(s.max()))
+        if (t0, t1) != geo[li][2:]:
+            geo[li] = (a, d, t0, t1)
+            row = cond.index[li]
+            cond.loc[row, "geometry"] = LineString([tuple((a + t0 * d) / hu), tuple((a + t1 * d) / hu)])
+            if "length_m" in cond.columns:
+                cond.loc[row, "length_m"] = t1 - t0
+    cond.attrs.update(lines["conductors"].attrs)
+    return {**lines, "conductors": cond}, geo, spans, keep, line_of, wire_of_pt, len(found)
+
+
 def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0, with_arms=None,
           own_only: bool = False) -> set:
     """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
@@ -688,14 +753,16 @@ def _realign(lines, geo, spans, params, hu):
     return {**lines, "conductors": cond, "conductor_segments": seg}, geo, len(turn)
 
 
-def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None) -> set:
+def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None, crowded=None) -> set:
     """Conductors that are not wires seen in the cross-section of their fitted spans, over the
     candidates ``p*``: most span points in a surface (``span_on_surface``: a roof's scan row,
     an eave), or no denser within 0.1 m than 0.2-0.5 m around (under ``min_contrast`` times:
     points of a crown that happen to line up; a wire is a concentration of points, its
     sub-conductors and neighbours sit at a few places around it). ``below``: (x, y, z) of every
     point off the ground, whatever its height: a span that is the top edge of a wall (a truck, a
-    fence seen from the street) is in a surface that reaches under the height window."""
+    fence seen from the street) is in a surface that reaches under the height window. ``crowded``,
+    a list, gets the indices (into ``spans``) of the spans that fit and are, on their own, under
+    ``min_contrast``."""
     import numpy as np
 
     from .core import catenary, span_on_surface
@@ -719,6 +786,7 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         flat = core_n = ring_n = 0
         for sp in line_spans:
             o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
+            n_core, n_ring = core_n, ring_n
             if span_on_surface(s, o, dz, sp.s_from, sp.s_to):
                 flat += sp.n_points
             elif below is not None and span_on_surface(
@@ -731,10 +799,26 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
             r = np.hypot(o[inside], dz[inside])
             core_n += int((r <= 0.1).sum())
             ring_n += int(((r > 0.2) & (r <= 0.5)).sum())
+            if crowded is not None and (core_n - n_core) / 0.01 < min_contrast * (ring_n - n_ring) / (0.25 - 0.04):
+                crowded.append(next(k for k, q in enumerate(spans) if q is sp))
         contrast = (core_n / 0.01) / max(ring_n / (0.25 - 0.04), 1e-9)  # densities per unit area (x pi)
         if flat > 0.5 * sum(sp.n_points for sp in line_spans) or contrast < min_contrast:
             out.add(li)
     return out
+
+
+def _drop_spans(gone, spans, geo, px, py, line_of, wire_of_pt):
+    """The spans ``gone`` taken out, with their points (those of their wire within their extent,
+    ``p*`` in metres) on no wire again. Returns (spans, line_of, wire_of_pt)."""
+    import numpy as np
+
+    for sp in gone:
+        a, d, _, _ = geo[sp.conductor]
+        mine = np.flatnonzero((line_of == sp.conductor) & (wire_of_pt == sp.wire))
+        s = (px[mine] - a[0]) * d[0] + (py[mine] - a[1]) * d[1]
+        out = mine[(s >= sp.s_from) & (s <= sp.s_to)]
+        line_of[out], wire_of_pt[out] = -1, -1
+    return [sp for sp in spans if not any(sp is q for q in gone)], line_of, wire_of_pt
 
 
 def _fold_into(along: dict, geo2, spans2, line_of2, wire2, geo, spans, lines, line_of, wire_of_pt, pos, hu):
@@ -986,6 +1070,9 @@ def toolbox_algorithms():
             Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
                       "points on it (within 0.25 m in plan and the fit's tolerance, no gap over 2 x v_max_m, up to "
                       "2 x s_min_m): a wire under the height window or next to a tower"),
+            Parameter("next_spans", bool, True, "past each wire's outermost span, search its plan trend for the "
+                      "next span (a catenary meeting it at its support, S_min long or more, a concentration of "
+                      "points, not a crown's edge): a wire seen sparsely past the last support the Hough found"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
