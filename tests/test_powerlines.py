@@ -1675,6 +1675,9 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
     py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
     poles = py[py["kind"] == "pole"]
     assert len(poles) >= {"part3_an": 3, "part3_ak": 0, "part2_ai": 3}[name]
+    # no tower on a street scan where the poles carry the wires (part2_ai: a crown where a next
+    # span stopped at the scan's edge was one while that end counted as a span end)
+    assert name == "part3_ak" or (py["kind"] == "tower").sum() == 0
     for g in poles.geometry:
         near = labelled[np.hypot(labelled[:, 0] - g.x, labelled[:, 1] - g.y) <= 1.0]
         assert len(near) >= 20 and np.hypot(*(near.mean(axis=0) - [g.x, g.y])) <= 0.5, (g.x, g.y)

@@ -265,6 +265,7 @@ class Span:
     offset_slope: float = 0.0  # its change per unit along the line (wires not quite parallel to it)
     offset_rms: float = 0.0  # its points' lateral scatter about that straight trend (a wire is thin)
     lateral_tol: float = np.inf  # how far across from that trend a point of this wire lies (3 robust sigma)
+    chained: bool = False  # found past another span's end (next_spans): it may stop where the view does
 
 
 def line_fit(x, y) -> tuple[float, float]:

@@ -305,6 +305,8 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     for sp in spans:
         if not sp.rms <= params["max_rms_3d_m"]:  # no catenary fits it: no evidence of a span ending here
             continue
+        if sp.chained:  # its near end is its support's, found already; its far end, where the view stopped
+            continue
         a, d, _, _ = geo[sp.conductor]
         normal = np.array([-d[1], d[0]])
         e = [a + s_ * d + (sp.offset + sp.offset_slope * s_) * normal for s_ in (sp.s_from, sp.s_to)]
@@ -534,6 +536,8 @@ def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, h
     ground), added as spans of those wires; their points join ``keep`` (relabelled where they are
     candidates on no wire) and each conductor's 2D line is stretched over its new spans.
     Returns (lines, geo, spans, keep, line_of, wire_of_pt, number of spans added)."""
+    import dataclasses
+
     import numpy as np
     from shapely.geometry import LineString
 
@@ -554,7 +558,8 @@ def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, h
     cond = lines["conductors"].copy()
     for li, wire, k, s, off, fit in found:
         number[(li, wire)] += 1
-        spans.append(_span(li, wire, number[(li, wire)], s, off, fit, z=pc.z[low[k]] * vu))
+        spans.append(dataclasses.replace(_span(li, wire, number[(li, wire)], s, off, fit, z=pc.z[low[k]] * vu),
+                                         chained=True))
         pts = low[k]
         at = pos[pts]
         line_of[at[at >= 0]], wire_of_pt[at[at >= 0]] = li, wire
@@ -999,7 +1004,10 @@ def toolbox_algorithms():
             "across a found tower's footprint being the tower's; a wire point farther across its span's plan trend "
             "than 3 robust sigma (at least 0.05 m) with other points off the ground within 0.3 m is foliage the "
             "wire runs through (n_off_trend_points); a conductor must stand out in its cross-section (not a roof's scan row or "
-            "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires). Bundled sub-conductors: rugged "
+            "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires; on a line "
+            "that holds wires, a span that on its own does not gives its points back: n_crowded_spans); past each "
+            "wire's outermost span, its next span (a catenary of S_min or more meeting it within 0.5 m at the "
+            "support, a concentration of points; next_spans, n_next_spans). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
             "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (or "
