@@ -1261,8 +1261,18 @@ def _contrast(tree, k, s, off, z, fit) -> float:
     o1, o0 = line_fit(s[k], off[k])
     near = np.unique(np.concatenate(tree.query_ball_point(tree.data[k], 0.5)))
     near = near[(s[near] >= s[k].min()) & (s[near] <= s[k].max())]
-    r = np.hypot(off[near] - o0 - o1 * s[near], z[near] - catenary(s[near], *fit[:3]))
-    core, ring = int((r <= 0.1).sum()), int(((r > 0.2) & (r <= 0.5)).sum())
+    return core_ring_contrast(*core_and_ring(np.hypot(off[near] - o0 - o1 * s[near],
+                                                      z[near] - catenary(s[near], *fit[:3]))))
+
+
+def core_and_ring(r) -> tuple[int, int]:
+    """Of points at distances ``r`` from a wire in its cross-section: how many lie within 0.1 m
+    (its core) and 0.2-0.5 m (the ring around it)."""
+    return int((r <= 0.1).sum()), int(((r > 0.2) & (r <= 0.5)).sum())
+
+
+def core_ring_contrast(core: int, ring: int) -> float:
+    """The core's density over the ring's, per unit of cross-section area (both x pi)."""
     return (core / 0.01) / max(ring / (0.25 - 0.04), 1e-9)
 
 

@@ -770,7 +770,7 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
     ``min_contrast``."""
     import numpy as np
 
-    from .core import catenary, span_on_surface
+    from .core import catenary, core_and_ring, core_ring_contrast, span_on_surface
 
     def frame(qx, qy, qz, a, d, lo, hi, reach):
         dx, dy = qx - a[0], qy - a[1]
@@ -780,7 +780,8 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
 
     out = set()
     for li, (a, d, _, _) in enumerate(geo):
-        line_spans = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
+        numbered = [(k, sp) for k, sp in enumerate(spans) if sp.conductor == li and sp.rms <= max_rms]
+        line_spans = [sp for _, sp in numbered]
         if not line_spans:
             continue
         lo, hi = min(sp.s_from for sp in line_spans), max(sp.s_to for sp in line_spans)
@@ -789,9 +790,8 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         if below is not None:
             sb, offb, zb = frame(*below, a, d, lo, hi, reach)
         flat = core_n = ring_n = 0
-        for sp in line_spans:
+        for k, sp in numbered:
             o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
-            n_core, n_ring = core_n, ring_n
             if span_on_surface(s, o, dz, sp.s_from, sp.s_to):
                 flat += sp.n_points
             elif below is not None and span_on_surface(
@@ -801,13 +801,11 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
                 # for a metre (wires stacked 0.3 m apart leave gaps)
                 flat += sp.n_points
             inside = (s >= sp.s_from) & (s <= sp.s_to)
-            r = np.hypot(o[inside], dz[inside])
-            core_n += int((r <= 0.1).sum())
-            ring_n += int(((r > 0.2) & (r <= 0.5)).sum())
-            if crowded is not None and (core_n - n_core) / 0.01 < min_contrast * (ring_n - n_ring) / (0.25 - 0.04):
-                crowded.append(next(k for k, q in enumerate(spans) if q is sp))
-        contrast = (core_n / 0.01) / max(ring_n / (0.25 - 0.04), 1e-9)  # densities per unit area (x pi)
-        if flat > 0.5 * sum(sp.n_points for sp in line_spans) or contrast < min_contrast:
+            core, ring = core_and_ring(np.hypot(o[inside], dz[inside]))
+            core_n, ring_n = core_n + core, ring_n + ring
+            if crowded is not None and ring and core_ring_contrast(core, ring) < min_contrast:
+                crowded.append(k)
+        if flat > 0.5 * sum(sp.n_points for sp in line_spans) or core_ring_contrast(core_n, ring_n) < min_contrast:
             out.add(li)
     return out
 
