@@ -1047,6 +1047,43 @@ def test_foliage_on_a_wires_catenary_is_not_wire_its_own_scatter_is():
     assert off_their_spans([sp], lines, px, py, pz, ones, ones, 0.2, clutter_xyz=np.zeros((0, 3)))[is_crown].sum() == 0
 
 
+def test_crown_points_a_span_took_as_its_own_are_foliage_and_wires_beside_walls_or_wires_are_not():
+    """A mobile scan's wire through a crown: the crown's points on its catenary are part of the
+    span's fit and set its lateral tolerance, so the off-trend test keeps them. Within 1 m along
+    the wire, foliage is denser 0.2-0.5 m around the curve than within 0.1 m of it and surrounds it
+    on most sides; a wire beside another wire, a wall or a pole has those on a few sides only."""
+    from toolbox_plugins.powerlines.core import _span, in_foliage
+
+    rng = np.random.default_rng(11)
+    s_w = np.arange(0.0, 60.0, 0.2)
+    z_w = catenary(s_w, 10.0, 30.0, 600.0) + rng.normal(0, 0.01, len(s_w))
+    wire = np.column_stack([s_w, rng.normal(0, 0.01, len(s_w)), z_w])
+    crown = rng.uniform([20.0, -0.5, -0.5], [23.0, 0.5, 0.5], (400, 3))
+    crown[:, 2] += catenary(crown[:, 0], 10.0, 30.0, 600.0)
+    # beside the wire: a wall 0.2 m across (5-15 m), a second wire 0.3 m across (25-40 m), a pole
+    # 0.3 m across at 45 m
+    other = wire[(s_w >= 25.0) & (s_w <= 40.0)] + [0.0, 0.3, 0.0]
+    ws, wz = np.meshgrid(np.arange(5.0, 15.0, 0.05), np.arange(-0.6, 0.6, 0.05))
+    wall = np.column_stack([ws.ravel(), np.full(ws.size, -0.2), catenary(ws.ravel(), 10.0, 30.0, 600.0) + wz.ravel()])
+    pz_ = catenary(np.array([45.0]), 10.0, 30.0, 600.0)[0] + np.arange(-3.0, 1.0, 0.03)
+    pole = np.column_stack([45.0 + rng.normal(0, 0.03, len(pz_)), -0.3 + rng.normal(0, 0.03, len(pz_)), pz_])
+    taken = crown[np.abs(crown[:, 2] - catenary(crown[:, 0], 10.0, 30.0, 600.0)) <= 0.15]  # the span's own
+    pts = np.vstack([wire, taken])
+    sp = _span(0, 0, 0, pts[:, 0], pts[:, 1], fit_catenary(pts[:, 0], pts[:, 2]), z=pts[:, 2])
+    lines = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 60.0)]  # the line's frame: x along, y across
+    around = np.vstack([wire, crown, other, wall, pole])
+    one = np.zeros(len(pts), np.int64)
+    flagged = in_foliage([sp], lines, pts[:, 0], pts[:, 1], pts[:, 2], one, one, 0.2, around)
+    is_crown = np.arange(len(pts)) >= len(wire)
+    assert flagged[is_crown].mean() >= 0.95
+    clear = ~is_crown & ((pts[:, 0] < 19.0) | (pts[:, 0] > 24.0))  # 1 m or more from the crown
+    assert not flagged[clear].any()  # the wire beside a wall (5-15 m), a wire and a pole stays wire
+    # points of no wire, or on no fitting span, are never flagged
+    none = np.full(len(pts), -1)
+    assert not in_foliage([sp], lines, pts[:, 0], pts[:, 1], pts[:, 2], none, none, 0.2, around).any()
+    assert not in_foliage([sp], lines, pts[:, 0], pts[:, 1], pts[:, 2], one, one, 0.001, around).any()
+
+
 @pytest.mark.parametrize("pieces, turned", [
     # (from, to, points, lateral rms, offset slope): one wire seen in three spans, 0.6 m of drift
     ([(0, 60, 300, 0.03, -0.006), (60, 80, 60, 0.03, -0.006), (80, 100, 40, 0.05, -0.006)], True),
@@ -1646,18 +1683,18 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.93, 0.77), ("part3_ak", 0.97, 0.9),
-                                                              ("part2_ai", 0.83, 0.84)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.94, 0.77), ("part3_ak", 0.97, 0.9),
+                                                              ("part2_ai", 0.89, 0.84)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors just under what is reached, not the
-    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.939 /
+    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.945 /
     R 0.776 (tangles and risers at pole tops and 2-4 m pieces across the street are missed);
     part3_ak, wires seen for 5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top
-    edge was taken for a wire); part2_ai: 0.837 / 0.845 (0.806 / 0.804 before the next span past
+    edge was taken for a wire); part2_ai: 0.899 / 0.841 (0.806 / 0.804 before the next span past
     the last pole and crowded spans: its sparse upper wire past that pole was missed, and a
-    catenary through crown tops under the lower wire taken; crown points within 0.1 m of the
-    wires where it runs through trees are still counted false)."""
+    catenary through crown tops under the lower wire taken; 0.837 / 0.845 before the foliage
+    test: crown points on the lower wire's spans where it runs through trees)."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14

@@ -1318,6 +1318,68 @@ def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
     return off_trend
 
 
+def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, window_m: float = 1.0,
+               min_contrast: float = 4.0, min_sides: int = 5, margin_m: float = 0.5) -> np.ndarray:
+    """Per wire point (``line_of``, ``wire_of`` its conductor and wire; -1: none): whether it lies
+    where its wire runs through foliage that hides it. Within ``window_m`` along the wire, the
+    points ``around_xyz`` (all those off the ground) 0.2-0.5 m from its spans' curve are no
+    sparser than within 0.1 m of it (``core_ring_contrast`` under ``min_contrast``) and surround it
+    on ``min_sides`` or more of 8 sides in its cross-section. A crown's points on the wire's curve
+    pass the off-trend test where they are the span's own (they set its lateral tolerance); a
+    wire beside other wires or a pole has points on a few sides only, and a wall or roof 0.2 m or
+    more away spans at most 4 (an arc of 2 arccos(0.2 / 0.5) = 132 degrees). A point on no
+    fitting span of its wire is kept. ``lines`` as for conductors_3d."""
+    from scipy.spatial import cKDTree
+
+    foliage = np.zeros(len(px), bool)
+    if not len(around_xyz) or not (line_of >= 0).any():
+        return foliage
+    tree = cKDTree(around_xyz)
+    for li in np.unique(line_of[line_of >= 0]):
+        anchor, direction, _, _ = lines[li]
+        for wire in np.unique(wire_of[line_of == li]):
+            wire_spans = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms <= max_rms]
+            if not wire_spans:
+                continue
+            m = np.flatnonzero((line_of == li) & (wire_of == wire))
+            near = np.unique(np.concatenate(tree.query_ball_point(np.column_stack([px[m], py[m], pz[m]]),
+                                                                  window_m + 0.5)).astype(np.int64))
+            q = around_xyz[near]
+
+            def frame(x, y, z):  # position along, and offset across / up from the span there
+                dx, dy = x - anchor[0], y - anchor[1]
+                s, off = dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0]
+                lat, dz = np.full(len(s), np.inf), np.full(len(s), np.inf)
+                for sp in wire_spans:
+                    at = (s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m)
+                    h = np.where(at, z - catenary(s, sp.z0, sp.s0, sp.c), np.inf)
+                    nearer = np.abs(h) < np.abs(dz)
+                    dz[nearer] = h[nearer]
+                    lat[nearer] = (off - sp.offset - sp.offset_slope * s)[nearer]
+                return s, lat, dz
+
+            s_q, lat_q, dz_q = frame(q[:, 0], q[:, 1], q[:, 2])
+            ok = np.isfinite(dz_q)
+            s_q, lat_q, dz_q = s_q[ok], lat_q[ok], dz_q[ok]
+            order = np.argsort(s_q)
+            s_q, lat_q, dz_q = s_q[order], lat_q[order], dz_q[order]
+            r = np.hypot(lat_q, dz_q)
+            side = (np.floor((np.arctan2(dz_q, lat_q) + np.pi) / (np.pi / 4)).astype(np.int64)) % 8
+            ring = (r > 0.2) & (r <= 0.5)
+            counts = np.zeros((len(r) + 1, 9))  # cumulative: core, then ring points on each side
+            counts[1:, 0] = np.cumsum(r <= 0.1)
+            for k in range(8):
+                counts[1:, 1 + k] = np.cumsum(ring & (side == k))
+            s_m, _, dz_m = frame(px[m], py[m], pz[m])
+            lo = np.searchsorted(s_q, s_m - window_m)
+            hi = np.searchsorted(s_q, s_m + window_m, side="right")
+            c = counts[hi] - counts[lo]
+            contrast = (c[:, 0] / 0.01) / np.maximum(c[:, 1:].sum(axis=1) / (0.25 - 0.04), 1e-9)
+            sides = (c[:, 1:] > 0).sum(axis=1)
+            foliage[m] = np.isfinite(dz_m) & (contrast < min_contrast) & (sides >= min_sides)
+    return foliage
+
+
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
     """Per point (``s`` along a line, ``off`` across it, height ``z``): the residual to the
     nearest of the line's ``spans`` it lies on - within the span's extent (± ``margin_m``),

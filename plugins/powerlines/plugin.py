@@ -26,8 +26,8 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import (grow_span_ends, local_surface_density, off_their_spans, points_on_spans, shape_classes,
-                       wire_point_spacing)
+    from .core import (grow_span_ends, in_foliage, local_surface_density, off_their_spans, points_on_spans,
+                       shape_classes, wire_point_spacing)
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
@@ -230,6 +230,14 @@ def _run(inputs, params, ctx):
                                         clutter_xyz=np.column_stack([pc.x[clutter] * hu, pc.y[clutter] * hu,
                                                                      pc.z[clutter] * vu]))]
     conductor_of[off_trend] = -1
+    # where a wire runs through a crown, the crown's points on its curve may be its span's own (and
+    # set the span's lateral tolerance): foliage surrounds them, denser than the wire's core
+    wire_pt = np.flatnonzero(conductor_of >= 0)
+    around = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0))
+    foliage = wire_pt[in_foliage(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
+                                 conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
+                                 np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]))]
+    conductor_of[foliage] = -1
     timings["off_trend_s"] = time.perf_counter() - t
 
     cond = lines["conductors"]
@@ -285,7 +293,7 @@ def _run(inputs, params, ctx):
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
-             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend),
+             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
@@ -1001,7 +1009,9 @@ def toolbox_algorithms():
             "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), the wire "
             "across a found tower's footprint being the tower's; a wire point farther across its span's plan trend "
             "than 3 robust sigma (at least 0.05 m) with other points off the ground within 0.3 m is foliage the "
-            "wire runs through (n_off_trend_points); a conductor must stand out in its cross-section (not a roof's scan row or "
+            "wire runs through (n_off_trend_points), and so is one where, within 1 m along the wire, the points "
+            "0.2-0.5 m round its curve are no sparser than within 0.1 m and surround it on 5 of 8 sides "
+            "(n_foliage_points); a conductor must stand out in its cross-section (not a roof's scan row or "
             "an eave in a surface, not the top edge of a wall, not points of a crown lined up; n_not_wires; on a line "
             "that holds wires, a span that on its own does not gives its points back: n_crowded_spans); past each "
             "wire's outermost span, its next span (a catenary of S_min or more meeting it within 0.5 m at the "
