@@ -1416,7 +1416,7 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, 
             residuals = [off[m] - slope * s[m] - icpt]
             if z is not None:
                 residuals.append(_height_residual(s[m], z[m], window_m))
-            best = None  # (clarity, upper group)
+            best = None  # (clarity, group of each point)
             for r in residuals:
                 split = _two_means_1d(r, min_points)
                 if split is None:
@@ -1424,11 +1424,47 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, 
                 side, c0, c1, sd = split
                 clarity = (c1 - c0) / max(sd, 1e-9)
                 if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd and (best is None or clarity > best[0]):
-                    best = (clarity, side)
+                    best = (clarity, side.astype(np.int64))
+            if best is None:
+                # a ribbon of 3-4 wires side by side: no cut in two is clean (one side holds two
+                # wires), a cut into one group per wire is
+                best = _clean_groups(residuals[0], min_points, min_gap, max_sd)
             if best is not None:
-                lab[m[best[1]]] = nxt
-                nxt += 1
+                groups = best[1]
+                for g in range(1, groups.max() + 1):
+                    lab[m[groups == g]] = nxt
+                    nxt += 1
     return lab
+
+
+def _clean_groups(r: np.ndarray, min_size: int, min_gap: float, max_sd: float, max_groups: int = 4):
+    """The fewest groups (3 to ``max_groups``) of values ``r`` (1D k-means from evenly spread
+    quantiles) that are each ``min_size`` or more, neighbouring centres ``min_gap`` and 4 standard
+    deviations of the widest group apart, that group no wider than ``max_sd``: (clarity, group of
+    each value, numbered from the lowest), or None."""
+    for k in range(3, max_groups + 1):
+        if len(r) < k * min_size:
+            return None
+        centres = np.quantile(r, (np.arange(k) + 0.5) / k)
+        for _ in range(50):
+            cuts = 0.5 * (centres[1:] + centres[:-1])
+            group = np.searchsorted(cuts, r)
+            sizes = np.bincount(group, minlength=k)
+            if (sizes == 0).any():
+                break
+            new = np.bincount(group, weights=r, minlength=k) / sizes
+            if np.allclose(new, centres):
+                break
+            centres = new
+        sizes = np.bincount(group, minlength=k)
+        if (sizes < min_size).any():
+            continue
+        # each group as thin as a wire (a crown's layer cut in three is not)
+        sd = float(np.sqrt(np.max(np.bincount(group, weights=(r - centres[group]) ** 2, minlength=k) / sizes)))
+        gap = float(np.min(np.diff(centres)))
+        if gap >= max(min_gap, 4 * sd) and sd <= max_sd:
+            return gap / max(sd, 1e-9), group
+    return None
 
 
 def _height_residual(s, z, window_m: float) -> np.ndarray:

@@ -240,6 +240,11 @@ def _run(inputs, params, ctx):
     conductor_of[foliage] = -1
     timings["off_trend_s"] = time.perf_counter() - t
 
+    # wires the 3D step told apart across one Hough line (a ribbon's phases closer than band_m)
+    # are conductors of their own in plan
+    lines, geo, spans, conductor_of, wire_of_input, n_side = _side_by_side(lines, geo, spans, conductor_of,
+                                                                           wire_of_input, pc.x * hu, pc.y * hu,
+                                                                           params, hu)
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
@@ -248,7 +253,7 @@ def _run(inputs, params, ctx):
         hmin.append(float(h.min()) if len(h) else np.nan)
         hmax.append(float(h.max()) if len(h) else np.nan)
     cond = cond.assign(height_min_m=hmin, height_max_m=hmax,
-                       n_wires=[len(np.unique(wire_of_pt[line_of == li])) for li in range(len(cond))])
+                       n_wires=[len(np.unique(wire_of_input[conductor_of == li])) for li in range(len(cond))])
     import geopandas as gpd
 
     # a piece no catenary fits (a crown the wire runs through) is no span of a wire: its points are
@@ -291,7 +296,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -766,6 +771,135 @@ def _realign(lines, geo, spans, params, hu):
     return {**lines, "conductors": cond, "conductor_segments": seg}, geo, len(turn)
 
 
+def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min_gap_m: float = 0.25):
+    """Conductors whose fitted spans lie in groups side by side across the line, ``min_gap_m`` or
+    more apart (the 3D step's cut across a piece): a ribbon's phases 0.3-0.4 m apart share one
+    Hough line (its band is band_m), and so do the sub-conductors of a bundle side by side that
+    far apart. Each group becomes a conductor of its own in plan (the original's extent, on the
+    group's own trend), with its spans and the points nearest its trend (``conductor_of``,
+    ``wire_of``: per input point, ``x``, ``y`` in metres); a group along another conductor (a
+    phase that line also holds) joins it, as further wires. Sub-conductors closer than
+    ``min_gap_m`` in plan (a triangle bundle's 0.2 m) stay one conductor per phase. Returns
+    (lines, geo, spans, conductor_of, wire_of, number of conductors added)."""
+    import numpy as np
+    import pandas as pd
+    from shapely.geometry import LineString
+
+    from .core import line_fit, span_in_frame
+
+    fitting = [sp for sp in spans if sp.rms <= params["max_rms_3d_m"]]
+    cond, seg = lines["conductors"], lines["conductor_segments"]
+    new_geo, new_rows, new_segs, new_spans = list(geo), [], [], []
+    conductor_of, wire_of = conductor_of.copy(), wire_of.copy()
+    next_wire = {li: int(max([sp.wire for sp in spans if sp.conductor == li], default=-1)) + 1
+                 for li in range(len(geo))}
+    moved = {}  # original conductor -> [(new index, offset trend (slope, intercept))]
+    for li in range(len(geo)):
+        mine = [sp for sp in fitting if sp.conductor == li]
+        if len(mine) < 2:
+            continue
+        mid = np.array([sp.offset + sp.offset_slope * 0.5 * (sp.s_from + sp.s_to) for sp in mine])
+        order = np.argsort(mid)
+        # runs of span offsets without a gap of half min_gap_m, then neighbouring runs whose
+        # middles lie closer than min_gap_m joined
+        runs = np.split(order, np.flatnonzero(np.diff(mid[order]) >= 0.5 * min_gap_m) + 1)
+        groups = [list(runs[0])]
+        for prev, r in zip(runs[:-1], runs[1:]):
+            if np.median(mid[r]) - np.median(mid[prev]) < min_gap_m:
+                groups[-1] += list(r)
+            else:
+                groups.append(list(r))
+        # a group is a wire along the line: S_min or more, and half the length its spans cover (a piece
+        # of a neighbouring wire at the line's end, a tower's arms and jumpers are not)
+        cover = sum(sp.s_to - sp.s_from for sp in mine)
+        groups = [g for g in groups if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
+            params["s_min_m"], 0.5 * cover / len(groups))] if len(groups) > 1 else groups
+        if not groups or (len(groups) < 2 and np.ptp(mid[groups[0]]) > 0.5 * min_gap_m):
+            continue
+        a, d, t0, t1 = geo[li]
+        n = np.array([-d[1], d[0]])
+        trends = []
+        for g in groups:  # the group's offset along the line: its spans' trends, sampled at both ends
+            ss = np.concatenate([[mine[k].s_from, mine[k].s_to] for k in g])
+            oo = np.concatenate([[mine[k].offset + mine[k].offset_slope * mine[k].s_from,
+                                  mine[k].offset + mine[k].offset_slope * mine[k].s_to] for k in g])
+            trends.append(line_fit(ss, oo) if np.ptp(ss) > 0 else (0.0, float(np.median(oo))))
+        moved[li] = []
+        for gi, (g, (o1, o0)) in enumerate(zip(groups, trends)):
+            d2 = d + o1 * n
+            d2 = d2 / np.hypot(*d2)
+            a2 = a + o0 * n
+            extent = (min(mine[k].s_from for k in g), max(mine[k].s_to for k in g))
+            onto_other = [j for j in range(len(geo)) if j != li and
+                          _along((a2, d2, *extent), geo[j], 0.5 * min_gap_m)]
+            if gi > 0 and onto_other:
+                moved[li].append((onto_other[0], o1, o0, [mine[k] for k in g]))
+                continue
+            if gi == 0:
+                k_new = li
+            else:
+                k_new = len(new_geo)
+                row = cond.iloc[li].copy()
+                row["conductor"] = k_new
+                new_rows.append(row)
+                for _, sr in seg[seg["conductor"] == li].iterrows():
+                    sr = sr.copy()
+                    sr["conductor"] = k_new
+                    new_segs.append(sr)
+                new_geo.append(None)
+            new_geo[k_new] = (a2, d2, t0, t1)
+            moved[li].append((k_new, o1, o0, [mine[k] for k in g]))
+    if not moved:
+        return lines, geo, spans, conductor_of, wire_of, 0
+    cond = pd.concat([cond, pd.DataFrame(new_rows)], ignore_index=True) if new_rows else cond.copy()
+    seg = pd.concat([seg, pd.DataFrame(new_segs)], ignore_index=True) if new_segs else seg.copy()
+    cond = cond.set_geometry("geometry", crs=lines["conductors"].crs)
+    seg = seg.set_geometry("geometry", crs=lines["conductor_segments"].crs)
+    for li, parts in moved.items():
+        a, d, t0, t1 = geo[li]
+        n = np.array([-d[1], d[0]])
+        pts = np.flatnonzero(conductor_of == li)
+        ps = (x[pts] - a[0]) * d[0] + (y[pts] - a[1]) * d[1]
+        po = -(x[pts] - a[0]) * d[1] + (y[pts] - a[1]) * d[0]
+        # each point to the group whose trend lies nearest across the line
+        near = np.argmin(np.abs(np.column_stack([po - (o1 * ps + o0) for _, o1, o0, _ in parts])), axis=1)
+        for k, (k_new, o1, o0, group_spans) in enumerate(parts):
+            conductor_of[pts[near == k]] = k_new
+            if k_new < len(geo) and k_new != li:  # joins another conductor: its wires numbered on after
+                renum = {}
+                for sp in group_spans:
+                    if sp.wire not in renum:
+                        renum[sp.wire] = next_wire[k_new]
+                        next_wire[k_new] += 1
+                mine_pts = pts[near == k]
+                wire_of[mine_pts] = [renum.get(w, renum[group_spans[0].wire]) for w in wire_of[mine_pts]]
+                for sp in group_spans:
+                    new_spans.append(span_in_frame(sp, geo[li], geo[k_new], k_new, renum[sp.wire]))
+                continue
+            a2, d2, _, _ = new_geo[k_new]
+
+            def onto(xy, o1=o1, o0=o0):  # a point of the original line onto the group's trend
+                p = np.asarray(xy) * hu
+                t = float((p - a) @ d)
+                return tuple((p + (o0 + o1 * t) * n) / hu)
+            rows = cond.index[cond["conductor"] == k_new]
+            cond.loc[rows[0], "geometry"] = LineString([onto(c) for c in cond.loc[rows[0], "geometry"].coords])
+            cond.loc[rows[0], "azimuth_deg"] = float(np.degrees(np.arctan2(d2[0], d2[1])) % 180.0)
+            cond.loc[rows[0], "n_points"] = int((near == k).sum())
+            for r in seg.index[seg["conductor"] == k_new]:
+                seg.loc[r, "geometry"] = LineString([onto(c) for c in seg.loc[r, "geometry"].coords])
+            for sp in group_spans:
+                new_spans.append(span_in_frame(sp, geo[li], new_geo[k_new], k_new, sp.wire))
+    done = {id(sp) for parts in moved.values() for _, _, _, g in parts for sp in g}
+    # the rest (spans that do not fit, groups under S_min) stay on the original conductor, in its new frame
+    spans = [span_in_frame(sp, geo[sp.conductor], new_geo[sp.conductor], sp.conductor, sp.wire)
+             if sp.conductor in moved else sp for sp in spans if id(sp) not in done] + new_spans
+    for g, src in ((cond, lines["conductors"]), (seg, lines["conductor_segments"])):
+        g.attrs.update(src.attrs)
+    return ({**lines, "conductors": cond, "conductor_segments": seg}, new_geo, spans, conductor_of, wire_of,
+            len(new_geo) - len(geo))
+
+
 def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None, crowded=None) -> set:
     """Conductors that are not wires seen in the cross-section of their fitted spans, over the
     candidates ``p*``: most span points in a surface (``span_on_surface``: a roof's scan row,
@@ -1018,7 +1152,8 @@ def toolbox_algorithms():
             "support, a concentration of points; next_spans, n_next_spans). Bundled sub-conductors: rugged "
             "sets shaped as tubes are wire-like, and the 3D step splits pieces across and in height, so each "
             "sub-conductor is a wire of conductors_3d; in plan one conductor per sub-conductor where they are at "
-            "least band_m apart, else one per phase at the bundle's centre; pylons where spans end on a tall column (or "
+            "least 0.25 m apart, else one per phase at the bundle's centre (a ribbon's phases closer than band_m "
+            "share a Hough line and are drawn apart from their fitted spans: n_side_by_side); pylons where spans end on a tall column (or "
             "where the wires run through it uncut, when a line never leaves it: its arm) standing under the lines "
             "(its base within 2 m of a conductor in plan, between conductors, or its arms over one: not a tree "
             "beside the line where wires lost in its crown end), and "
