@@ -246,6 +246,9 @@ WIRE_LATERAL_RMS_M = 0.15
 # the least lateral tolerance of a wire's points about its trend, whatever their measured
 # scatter: a few centimetres of ranging noise on either side
 WIRE_LATERAL_FLOOR_M = 0.05
+# the least distance across the line at which the 3D step tells side-by-side wires apart (a
+# triangle bundle's 0.2 m stays one piece, a ribbon's 0.3 m does not)
+SIDE_BY_SIDE_MIN_GAP_M = 0.25
 
 
 @dataclass
@@ -1265,15 +1268,23 @@ def _contrast(tree, k, s, off, z, fit) -> float:
                                                       z[near] - catenary(s[near], *fit[:3]))))
 
 
+def core_and_ring_masks(r) -> tuple[np.ndarray, np.ndarray]:
+    """Of points at distances ``r`` from a wire in its cross-section: which lie within 0.1 m (its
+    core) and which 0.2-0.5 m (the ring around it)."""
+    return r <= 0.1, (r > 0.2) & (r <= 0.5)
+
+
 def core_and_ring(r) -> tuple[int, int]:
-    """Of points at distances ``r`` from a wire in its cross-section: how many lie within 0.1 m
-    (its core) and 0.2-0.5 m (the ring around it)."""
-    return int((r <= 0.1).sum()), int(((r > 0.2) & (r <= 0.5)).sum())
+    """How many of the points at distances ``r`` lie in the core and in the ring
+    (``core_and_ring_masks``)."""
+    core, ring = core_and_ring_masks(r)
+    return int(core.sum()), int(ring.sum())
 
 
-def core_ring_contrast(core: int, ring: int) -> float:
-    """The core's density over the ring's, per unit of cross-section area (both x pi)."""
-    return (core / 0.01) / max(ring / (0.25 - 0.04), 1e-9)
+def core_ring_contrast(core, ring):
+    """The core's density over the ring's, per unit of cross-section area (both x pi); counts or
+    arrays of counts."""
+    return (core / 0.01) / np.maximum(ring / (0.25 - 0.04), 1e-9)
 
 
 def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, clutter_xyz=None,
@@ -1363,18 +1374,17 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
             s_q, lat_q, dz_q = s_q[ok], lat_q[ok], dz_q[ok]
             order = np.argsort(s_q)
             s_q, lat_q, dz_q = s_q[order], lat_q[order], dz_q[order]
-            r = np.hypot(lat_q, dz_q)
+            core, ring = core_and_ring_masks(np.hypot(lat_q, dz_q))
             side = (np.floor((np.arctan2(dz_q, lat_q) + np.pi) / (np.pi / 4)).astype(np.int64)) % 8
-            ring = (r > 0.2) & (r <= 0.5)
-            counts = np.zeros((len(r) + 1, 9))  # cumulative: core, then ring points on each side
-            counts[1:, 0] = np.cumsum(r <= 0.1)
+            counts = np.zeros((len(core) + 1, 9))  # cumulative: core, then ring points on each side
+            counts[1:, 0] = np.cumsum(core)
             for k in range(8):
                 counts[1:, 1 + k] = np.cumsum(ring & (side == k))
             s_m, _, dz_m = frame(px[m], py[m], pz[m])
             lo = np.searchsorted(s_q, s_m - window_m)
             hi = np.searchsorted(s_q, s_m + window_m, side="right")
             c = counts[hi] - counts[lo]
-            contrast = (c[:, 0] / 0.01) / np.maximum(c[:, 1:].sum(axis=1) / (0.25 - 0.04), 1e-9)
+            contrast = core_ring_contrast(c[:, 0], c[:, 1:].sum(axis=1))
             sides = (c[:, 1:] > 0).sum(axis=1)
             foliage[m] = np.isfinite(dz_m) & (contrast < min_contrast) & (sides >= min_sides)
     return foliage
@@ -1396,7 +1406,7 @@ def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
     return best_r, best_k
 
 
-def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = 0.25, depth: int = 3,
+def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_BY_SIDE_MIN_GAP_M, depth: int = 3,
                    window_m: float = 5.0, max_sd: float = WIRE_LATERAL_RMS_M) -> np.ndarray:
     """Sub-conductors of a bundle hang side by side (2), in a triangle (3) or a square (4),
     closer than their scatter can keep apart in a neighbour graph: split a piece in two where

@@ -771,7 +771,7 @@ def _realign(lines, geo, spans, params, hu):
     return {**lines, "conductors": cond, "conductor_segments": seg}, geo, len(turn)
 
 
-def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min_gap_m: float = 0.25):
+def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min_gap_m: float | None = None):
     """Conductors whose fitted spans lie in groups side by side across the line, ``min_gap_m`` or
     more apart (the 3D step's cut across a piece): a ribbon's phases 0.3-0.4 m apart share one
     Hough line (its band is band_m), and so do the sub-conductors of a bundle side by side that
@@ -779,13 +779,16 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
     group's own trend), with its spans and the points nearest its trend (``conductor_of``,
     ``wire_of``: per input point, ``x``, ``y`` in metres); a group along another conductor (a
     phase that line also holds) joins it, as further wires. Sub-conductors closer than
-    ``min_gap_m`` in plan (a triangle bundle's 0.2 m) stay one conductor per phase. Returns
-    (lines, geo, spans, conductor_of, wire_of, number of conductors added)."""
+    ``min_gap_m`` in plan (default: the 3D step's own cut, SIDE_BY_SIDE_MIN_GAP_M; a triangle
+    bundle's 0.2 m) stay one conductor per phase. Returns (lines, geo, spans, conductor_of,
+    wire_of, number of conductors added)."""
     import numpy as np
     import pandas as pd
     from shapely.geometry import LineString
 
-    from .core import line_fit, span_in_frame
+    from .core import SIDE_BY_SIDE_MIN_GAP_M, line_fit, span_in_frame
+
+    min_gap_m = SIDE_BY_SIDE_MIN_GAP_M if min_gap_m is None else min_gap_m
 
     fitting = [sp for sp in spans if sp.rms <= params["max_rms_3d_m"]]
     cond, seg = lines["conductors"], lines["conductor_segments"]
