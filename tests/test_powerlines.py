@@ -707,6 +707,60 @@ def test_a_tower_stands_under_its_lines_and_a_tree_beside_them_does_not():
     assert _under_its_lines(100.0, -6.2, square(100, -6.2, 2), lines(0.0, length=85.0), **args)
 
 
+def test_a_pole_ending_its_line_under_another_line_is_a_pylon():
+    """Line B ends at a pole that stands under line A, which crosses over it at 27 degrees (the
+    synthetic mobile stacked circuit). A's spans run past the pole, and A's earth wire, lost in
+    the view 6 m away at 32 m, ends near it: neither makes the pole a tree that wires pass, nor
+    too short for the wires it holds. A crown the same lines pass (wires lost in it end) stays no
+    pylon."""
+    from toolbox_plugins.powerlines.core import find_pylons
+
+    rng = np.random.default_rng(5)
+    h = rng.uniform(0.3, 11.0, 400)
+    pole = np.column_stack([rng.normal(0, 0.03, 400), rng.normal(0, 0.03, 400), h])
+    b_dir = np.array([np.cos(np.radians(215.0)), np.sin(np.radians(215.0))])  # B runs away south-west
+    b_across = np.array([-b_dir[1], b_dir[0]])
+    arm = np.outer(rng.uniform(-1.3, 1.3, 80), b_across)
+    pole = np.vstack([pole, np.column_stack([arm, rng.normal(10.0, 0.03, 80)])])
+    ends, end_hag, span_lines, lines_xy = [], [], [], []
+    for off in (-1.2, 0.0, 1.2):  # B's three wires end at the arm, their far ends at the next pole
+        a = off * b_across
+        b = a + 50.0 * b_dir
+        ends += [a, b]
+        end_hag += [10.0, 10.0]
+        span_lines.append((a, b))
+        lines_xy.append((a, b))
+    a_dir = np.array([np.cos(np.radians(7.8)), np.sin(np.radians(7.8))])
+    for off, hag_a in ((-0.5, 13.5), (-0.5, 18.5), (-0.5, 23.5)):  # A passes over it, stacked
+        a = np.array([0.0, off]) - 150.0 * a_dir
+        b = np.array([0.0, off]) + 40.0 * a_dir
+        ends += [a, b]
+        end_hag += [hag_a, hag_a]
+        span_lines.append((a, b))
+        lines_xy.append((a, b))
+    earth = (np.array([4.6, -4.4]) - 20.0 * a_dir, np.array([4.6, -4.4]))  # lost in the view
+    ends += list(earth)
+    end_hag += [32.7, 32.7]
+    span_lines.append(earth)
+    headings = [float(np.degrees(np.arctan2(d[1], d[0])) % 180.0) for d in (b_dir,) * 3 + (a_dir,) * 3]
+    passed = []
+    found = find_pylons(pole[:, 0], pole[:, 1], pole[:, 2], np.array(ends), np.array(end_hag), headings,
+                        lines_xy, span_lines=span_lines, passed_by=passed)
+    assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0 and found[0].n_spans == 3, \
+        [(p.x, p.y, p.n_spans) for p in found + passed]
+    # a crown under A where one of A's wires ends, lost in it, while the others run past: a tree
+    # (judged as if it were not rugged: the wires passing it tell)
+    crown = rng.normal([60.0, 7.6, 12.0], [1.5, 1.5, 2.5], (4000, 3))
+    crown = crown[crown[:, 2] > 1.0]
+    at = np.array([60.0, 7.6])
+    cut = [(at - 150.0 * a_dir, at - 0.5 * a_dir), (at + 0.5 * a_dir, at + 100.0 * a_dir)] + \
+        [(at - 120.0 * a_dir + [0, dy], at + 90.0 * a_dir + [0, dy]) for dy in (0.8, -0.8)]
+    ends2 = np.array([e for seg in cut for e in seg])
+    found = find_pylons(crown[:, 0], crown[:, 1], crown[:, 2], ends2, np.full(len(ends2), 13.5), [7.8, 7.8],
+                        cut[2:], span_lines=cut, max_rugged=1.0, passed_by=(passed := []))
+    assert found == [] and len(passed) == 1, [(p.x, p.y, p.n_spans) for p in found]
+
+
 def _pole_points(rng, x, y, height_m, radius_m=0.15, per_m=60):
     """A pole's surface as a street scanner sees it: the half facing the road, from 0.3 m up."""
     n = int(height_m * per_m)
@@ -748,6 +802,15 @@ def test_poles_are_thin_columns_that_carry_the_wires():
     assert np.hypot(pts[below_head, 0] - p.x, pts[below_head, 1] - p.y).max() <= 0.45 + 0.1
     assert inside[n_pole:].sum() <= 0.1 * inside.sum()
     assert find_poles(pts[:, 0], pts[:, 1], pts[:, 2], wire[:0, 0], wire[:0, 1], wire[:0, 2], [0.0], lines) == []
+    # another line crossing 3 m over the pole, whose wires end at it: measured against the span
+    # ends there (with their heights) it still carries them; against every wire near it, not
+    over = np.column_stack([s * 0.6, s * 0.8, np.full_like(s, 13.5)])
+    both = np.vstack([wire, over])
+    more = (pts[:, 0], pts[:, 1], pts[:, 2], both[:, 0], both[:, 1], both[:, 2], [0.0, 53.1],
+            lines + [(over[0, :2], over[-1, :2])])
+    at_pole = np.array([[0.0, 0.4], [0.3, 0.4]])
+    assert len(find_poles(*more, span_ends=at_pole, span_end_hag=np.array([10.2, 10.2]))) == 1
+    assert find_poles(*more, span_ends=at_pole) == []
 
 
 def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):

@@ -1608,7 +1608,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
                 end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
                 max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
-                under_line_m: float = 2.0, max_side_ratio: float = 2.0):
+                under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -1617,15 +1617,18 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     (degrees, counter-clockwise from east, 0-180).
 
     On a ``cell_m`` grid of the points within ``reach_m`` of a conductor line, a cell is *tall*
-    when its highest point reaches ``top_share`` of the highest span end within ``end_radius_m``
-    (a tower stands as high as its attachments; a tree with no span ending at it is never tall,
-    nor is a pole measured against another line's wires passing over it), and a *column* when
+    when its highest point reaches ``top_share`` of the nearest span end's height within
+    ``end_radius_m`` (a tower stands as high as the attachment it holds there; a tree with no
+    span ending at it is never tall, nor is a pole measured against another line's wires passing
+    over it or ending near it), and a *column* when
     its points fill at least ``column_share`` of the 1 m layers from its top down to 3 m above
     ground (a lattice or a pole, not an arm or a crown). Tall cells join into candidates (8-
     connected); a candidate with a column, at most ``max_side_m`` across, where at least
     ``min_ends`` and more spans end (within ``end_radius_m`` of its body, or its arms' reach; a
     span end counts for the nearest candidate only) than run past it (``span_lines``: each span's
-    plan segment) is a tower: wires end at towers and pass trees. Tiles cut spans at their edges,
+    plan segment, span i's ends being ``span_ends[2i]`` and ``[2i + 1]``) is a tower: wires end at
+    towers and pass trees. Only the spans along those that end there (within ``along_deg``) count
+    as running past: a pole that ends one line may stand under another line crossing it. Tiles cut spans at their edges,
     where no tower stands: that is what the column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
     ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
     the square root of its footprint, arms included). The base is the middle of the column
@@ -1672,9 +1675,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     span_end_hag = np.asarray(span_end_hag, float)
     ends = cKDTree(np.asarray(span_ends, float))
     idx = np.flatnonzero(has)
-    for i, nb in zip(idx, ends.query_ball_point(centres[idx], end_radius_m)):
-        if nb:
-            wire_top[i] = float(np.max(span_end_hag[nb]))
+    d_near, j_near = ends.query(centres[idx], distance_upper_bound=end_radius_m)
+    hit = np.isfinite(d_near)
+    wire_top[idx[hit]] = span_end_hag[j_near[hit]]
     tall = has & (wire_top > 0) & (top >= top_share * wire_top)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
     structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms
@@ -1708,15 +1711,22 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     cxy = np.array([c for _, c, _, _ in shaped])
     reach = np.array([max(end_radius_m, a) for _, _, a, _ in shaped])
     d_end = np.hypot(*(np.asarray(span_ends, float)[:, None, :] - cxy[None, :, :]).transpose(2, 0, 1))
-    d_end = np.where(d_end <= reach[None, :], d_end, np.inf)
+    # nor the ends of wires held far over its top (another line's, lost in the view beside it)
+    can_hold = span_end_hag[:, None] * top_share <= np.array([h for _, _, _, h in shaped])[None, :]
+    d_end = np.where((d_end <= reach[None, :]) & can_hold, d_end, np.inf)
     owner = np.where(np.isfinite(d_end.min(axis=1)), d_end.argmin(axis=1), -1)
     found = []
     for k, (cells, (cx, cy), arm, height) in enumerate(shaped):
         n_ends = int(np.sum(owner == k))
         if n_ends < min_ends:
             continue
-        passed = span_lines is not None and \
-            sum(1 for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m)) >= n_ends
+        passed = False
+        if span_lines is not None:
+            running = [(a, b) for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m)]
+            if len(span_lines) * 2 == len(span_ends):
+                ending = [span_lines[i // 2] for i in np.flatnonzero(owner == k)]
+                running = [r for r in running if any(_parallel(r, e, along_deg) for e in ending)]
+            passed = len(running) >= n_ends
         if passed and passed_by is None:
             continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
@@ -1733,7 +1743,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     return found
 
 
-def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None,
+def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None, span_end_hag=None,
                top_share: float = 0.8, radius_m: float = 0.25, ring_m: float = 0.75, window_m: float = 2.0,
                min_thin_m: float = 2.5, min_fill: float = 0.6, wire_reach_m: float = 2.0, end_radius_m: float = 10.0,
                column_m: float = 0.45, voxel_m: float = 0.05, head_m: float = 1.8,
@@ -1751,7 +1761,10 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     linked in plan (0.3 m) are a pole when they rise over ``min_thin_m``, its column (points
     within ``column_m`` of the axis) fills ``min_fill`` of the 0.5 m layers from 1 m above the
     ground up to its thin part's top, a wire passes within ``wire_reach_m`` of its axis, and it
-    stands at least ``top_share`` as high as those wires (a street light under them does not).
+    stands at least ``top_share`` as high as those wires (a street light under them does not). Where
+    spans end within that reach (``span_ends``, ``span_end_hag``: plan positions and heights above
+    ground) it is measured against them alone: the pole that ends a line may stand under another
+    line's wires.
     Its top is where the column above the thin part first breaks by 1.5 m; its points are its
     column and its head (within ``head_m`` of the axis in its top metre: cross arms, insulators)."""
     from scipy import ndimage
@@ -1807,7 +1820,10 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         breaks = np.flatnonzero(np.diff(above) > 1.5)
         top = float(above[breaks[0]] if len(breaks) else above[-1]) if len(above) else thin_top
         nb = wires.query_ball_point(axis, wire_reach_m)
-        if not nb or top < top_share * float(wire_hag[nb].max()):
+        mine = ends.query_ball_point(axis, wire_reach_m) if ends is not None and span_end_hag is not None else []
+        carried = float(np.max(np.asarray(span_end_hag, float)[mine])) if mine else \
+            float(wire_hag[nb].max()) if nb else np.inf
+        if not nb or top < top_share * carried:
             continue
         dist = [_point_segment_distance(axis[0], axis[1], a, b) for a, b in lines_xy]
         n_ends = len(ends.query_ball_point(axis, end_radius_m)) if ends is not None else 0
@@ -1817,7 +1833,7 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         cc, rr = np.meshgrid(np.arange(side), np.arange(side))
         centre_d = np.hypot(x0 + (cc + 0.5) * cell - axis[0], y0 + (rr + 0.5) * cell - axis[1])
         cells = (rr * side + cc)[centre_d <= column_m].ravel()
-        found.append(Pylon(float(axis[0]), float(axis[1]), max(top, float(wire_hag[nb].max())), n_ends,
+        found.append(Pylon(float(axis[0]), float(axis[1]), max(top, carried), n_ends,
                            float(line_headings[int(np.argmin(dist))]) if dist else 0.0, cells,
                            (float(x0), float(y0), cell, side, side), kind="pole", head_m=head_m))
     return found
@@ -1855,6 +1871,13 @@ def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
     if hag is not None and p.head_m > 0:
         inside |= (np.hypot(x - p.x, y - p.y) <= p.head_m) & (hag >= p.height_m - 1.0) & (hag <= p.height_m + 0.3)
     return inside
+
+
+def _parallel(s1, s2, max_deg: float) -> bool:
+    """Whether plan segments s1 and s2 ((a, b) each) run within ``max_deg`` of one direction."""
+    d1, d2 = np.subtract(s1[1], s1[0]), np.subtract(s2[1], s2[0])
+    n = float(np.hypot(*d1) * np.hypot(*d2))
+    return n > 0 and abs(float(d1 @ d2)) / n >= np.cos(np.radians(max_deg))
 
 
 def _passes(px, py, a, b, reach, margin):

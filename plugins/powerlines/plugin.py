@@ -335,7 +335,8 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
     wire = conductor_of >= 0
     poles = find_poles(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu, hag[wire],
-                       headings, lines_xy, span_ends=ends, top_share=params["pylon_top_share"])
+                       headings, lines_xy, span_ends=ends, span_end_hag=np.asarray(end_z) - ground_z,
+                       top_share=params["pylon_top_share"])
     if poles:
         # where a pole carries the wires, a tower found beside it is the crown next to the pole
         # that took its span ends (a street scan's trees reach the wires' height)
