@@ -983,6 +983,33 @@ def test_a_wire_past_its_last_support_is_its_next_span(seed):
                       min_span_m=8.0) == []
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_sparse_wire_is_searched_on_from_where_its_grown_points_end(seed):
+    """An earth wire a street scanner sees at about a point per metre: its fitted span ends at
+    s = 40, grow_span_ends carried it on to s = 55 on the same catenary, and past a gap of 1-3 m it
+    goes on to s = 150. Searched from the span's end, the rest starts 16 m away (no next span);
+    from its farthest grown point (line_of / wire_of given), it is found."""
+    from toolbox_plugins.powerlines.core import Span, next_spans
+
+    rng = np.random.default_rng(seed)
+    c, s0, z0 = 2000.0, 60.0, 30.0
+    s_all = np.sort(np.r_[rng.uniform(0.0, 55.0, 110), 56.0 + np.cumsum(rng.uniform(0.3, 2.0, 200))])
+    s_all = s_all[s_all < 150.0]
+    z = catenary(s_all, z0, s0, c) + rng.normal(0, 0.02, len(s_all))
+    y = rng.normal(0, 0.02, len(s_all))
+    sp = Span(0, 0, 0, s0, c, z0, 0.0, 40.0, 0.02, int((s_all <= 40.0).sum()), 0.1)
+    line = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 40.0)
+    free = s_all > 55.0
+    line_of = np.where(free, -1, 0)
+    args = ([sp], [line], s_all, y, z, free, 0.2)
+    kw = dict(max_gap_m=5.0, reach_m=64.0, min_span_m=8.0)
+    assert next_spans(*args, **kw) == []
+    found = next_spans(*args, **kw, line_of=line_of, wire_of=line_of)
+    assert len(found) >= 1 and all((li, w) == (0, 0) for li, w, *_ in found)
+    got = np.concatenate([f[2] for f in found])
+    assert free[got].all() and len(got) >= 0.9 * free.sum()
+
+
 def test_a_span_through_a_crown_on_a_line_with_wires_is_crowded():
     """On a line that holds a wire, a second catenary through points of a crown that line up is,
     on its own, no denser within 0.1 m than around it: it is listed as crowded and the line,

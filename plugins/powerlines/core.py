@@ -1187,7 +1187,7 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
 
 def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float, min_span_m: float,
                min_points: int = 12, lateral_m: float = 0.3, max_step_m: float = 0.5, max_rise_m: float = 3.0,
-               min_contrast: float = 4.0, max_rounds: int = 4) -> list:
+               min_contrast: float = 4.0, max_rounds: int = 4, line_of=None, wire_of=None) -> list:
     """The spans of a found wire beyond its last one: past a support the wire hangs on in a new
     catenary that ``grow_span_ends`` (the old one continued) leaves, and where the survey sees it
     sparsely among crowns (a mobile scan's wire past the last pole it passes) the shape test and
@@ -1198,10 +1198,13 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
     continued, up to ``reach_m`` on and ``max_rise_m`` up or down from its end height, are
     searched for catenaries (``peel_catenaries``: thin, gentle, ``min_span_m`` long, no gap over
     ``max_gap_m``). One is that wire's next span when it starts within ``max_gap_m`` of the end,
-    meets the end within ``max_step_m`` in height (they hang on the same support), and is a
+    meets the end within ``max_step_m`` in height (they hang on the same support), is thin across
+    (its points' median distance from their plan trend at most ``lateral_m`` / 4), and is a
     concentration of points (within 0.1 m of it ``min_contrast`` times denser than 0.2-0.5 m
     around, among all ``p*``: a crown's points lined up are not). Its far end is searched again,
-    up to ``max_rounds`` spans on. ``lines`` as for conductors_3d.
+    up to ``max_rounds`` spans on. ``lines`` as for conductors_3d. With ``line_of``/``wire_of``
+    (each p*'s conductor and wire, -1: none), a wire's end is its farthest point on that catenary
+    (``grow_span_ends`` carries a wire past its span's end, a sparse one with gaps between).
     Returns [(line, wire, indices into p*, s, offsets across, fit)] per span found."""
     found = []
     taken = ~np.asarray(free, bool).copy()
@@ -1212,6 +1215,12 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
             for sign in (1.0, -1.0):
                 sp = max(mine, key=lambda q: sign * (q.s_to if sign > 0 else q.s_from))
                 end = sp.s_to if sign > 0 else sp.s_from
+                if line_of is not None:
+                    ours = (line_of == li) & (wire_of == wire)
+                    past = ours & (sign * (s - end) > 0) & \
+                        (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
+                    if past.any():
+                        end = float(s[past].max() if sign > 0 else s[past].min())
                 z_end = float(catenary(end, sp.z0, sp.s0, sp.c))
                 o0, o1 = sp.offset, sp.offset_slope
                 for _ in range(max_rounds):
@@ -1227,6 +1236,11 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                         near = float(np.min(sign * (s[k] - end)))
                         step = abs(float(catenary(end, *fit[:3])) - z_end)
                         if near > max_gap_m or step > max_step_m:
+                            continue
+                        # thin across: a wire's points hug their trend, clutter (a cross arm, a
+                        # crown's edge) spreads over the band searched (median lateral_m / 2)
+                        o1_, o0_ = line_fit(s[k], off[k])
+                        if np.median(np.abs(off[k] - o1_ * s[k] - o0_)) > lateral_m / 4:
                             continue
                         if tree is None:
                             tree = cKDTree(np.column_stack([px, py, pz]))

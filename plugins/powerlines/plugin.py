@@ -558,9 +558,14 @@ def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, h
     from .core import _span, next_spans
 
     free = ~np.isin(low, keep[line_of >= 0])
+    at_low = np.full(len(pc), -1, np.int64)
+    at_low[low] = np.arange(len(low))
+    low_line, low_wire = np.full(len(low), -1, np.int64), np.full(len(low), -1, np.int64)
+    on = keep[at_low[keep] >= 0]
+    low_line[at_low[on]], low_wire[at_low[on]] = line_of[at_low[keep] >= 0], wire_of_pt[at_low[keep] >= 0]
     found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
                        max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
-                       min_span_m=params["s_min_m"])
+                       min_span_m=params["s_min_m"], line_of=low_line, wire_of=low_wire)
     if not found:
         return lines, geo, spans, keep, line_of, wire_of_pt, 0
     spans, geo = list(spans), list(geo)
