@@ -1212,11 +1212,11 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
     for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
         for wire in sorted({sp.wire for sp in line_spans}):
             mine = [sp for sp in line_spans if sp.wire == wire]
+            ours = (line_of == li) & (wire_of == wire) if line_of is not None else None
             for sign in (1.0, -1.0):
                 sp = max(mine, key=lambda q: sign * (q.s_to if sign > 0 else q.s_from))
                 end = sp.s_to if sign > 0 else sp.s_from
-                if line_of is not None:
-                    ours = (line_of == li) & (wire_of == wire)
+                if ours is not None:
                     past = ours & (sign * (s - end) > 0) & \
                         (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
                     if past.any():
@@ -1817,6 +1817,7 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     plan, wires = cKDTree(p[:, :2]), cKDTree(np.column_stack([wire_x, wire_y]))
     wire_hag = np.asarray(wire_hag, float)
     ends = cKDTree(np.asarray(span_ends, float)) if span_ends is not None and len(span_ends) else None
+    end_hag = None if span_end_hag is None else np.asarray(span_end_hag, float)
     cell = 0.1
     k_cells = int(np.ceil(column_m / cell)) + 1
     found = []
@@ -1834,8 +1835,8 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         breaks = np.flatnonzero(np.diff(above) > 1.5)
         top = float(above[breaks[0]] if len(breaks) else above[-1]) if len(above) else thin_top
         nb = wires.query_ball_point(axis, wire_reach_m)
-        mine = ends.query_ball_point(axis, wire_reach_m) if ends is not None and span_end_hag is not None else []
-        carried = float(np.max(np.asarray(span_end_hag, float)[mine])) if mine else \
+        mine = ends.query_ball_point(axis, wire_reach_m) if ends is not None and end_hag is not None else []
+        carried = float(np.max(end_hag[mine])) if mine else \
             float(wire_hag[nb].max()) if nb else np.inf
         if not nb or top < top_share * carried:
             continue

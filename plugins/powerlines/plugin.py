@@ -557,12 +557,13 @@ def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, h
 
     from .core import _span, next_spans
 
-    free = ~np.isin(low, keep[line_of >= 0])
+    # each low point's conductor and wire so far (-1: none; free: on no wire yet)
     at_low = np.full(len(pc), -1, np.int64)
     at_low[low] = np.arange(len(low))
+    in_low = at_low[keep] >= 0
     low_line, low_wire = np.full(len(low), -1, np.int64), np.full(len(low), -1, np.int64)
-    on = keep[at_low[keep] >= 0]
-    low_line[at_low[on]], low_wire[at_low[on]] = line_of[at_low[keep] >= 0], wire_of_pt[at_low[keep] >= 0]
+    low_line[at_low[keep[in_low]]], low_wire[at_low[keep[in_low]]] = line_of[in_low], wire_of_pt[in_low]
+    free = low_line < 0
     found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
                        max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
                        min_span_m=params["s_min_m"], line_of=low_line, wire_of=low_wire)
