@@ -2130,3 +2130,52 @@ def test_an_accumulator_larger_than_the_standard_kit_counts_the_same():
         a.vote(x[:200], y[:200], -1)
         b.vote(x[:200], y[:200], -1)
         assert a.peak() == b.peak()
+
+
+def _bridge_scene(rng, kink=False):
+    """A wire 80 m along x (points every ~0.3 m) whose candidates stop 7 m either side of a crown
+    at s = 40, a second wire 0.3 m beside it (a ribbon's phase) and the crown's foliage; with
+    ``kink`` the two pieces hang in catenaries of their own, meeting at a support at s = 40."""
+    from toolbox_plugins.powerlines.core import _span, fit_catenary
+
+    def wire(s, lateral):
+        z = catenary(s, 20.0, 20.0, 900.0) if kink and lateral == 0 else catenary(s, 20.0, 40.0, 900.0)
+        if kink and lateral == 0:
+            z = np.where(s < 40.0, z, catenary(s, 20.0, 60.0, 900.0))
+        return np.column_stack([s, lateral + rng.normal(0, 0.02, len(s)), z + rng.normal(0, 0.03, len(s))])
+
+    w = wire(np.sort(rng.uniform(0.0, 80.0, 270)), 0.0)
+    beside = wire(np.sort(rng.uniform(0.0, 80.0, 270)), 0.3)
+    d = rng.normal(size=(3000, 3))
+    crown = np.array([40.0, 0.0, 19.5]) + 3.0 * d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0, 1, (3000, 1)) ** (1 / 3)
+    pts = np.vstack([w, beside, crown])
+    is_gap = np.r_[(w[:, 0] > 33.0) & (w[:, 0] < 47.0), np.zeros(len(beside) + len(crown), bool)]
+    spans = []
+    for i, (lo, hi) in enumerate(((0.0, 33.0), (47.0, 80.0))):
+        m = (w[:, 0] >= lo) & (w[:, 0] <= hi)
+        spans.append(_span(0, i, 0, w[m, 0], w[m, 1], fit_catenary(w[m, 0], w[m, 2]), z=w[m, 2]))
+    free = np.r_[(w[:, 0] > 33.0) & (w[:, 0] < 47.0), np.ones(len(beside) + len(crown), bool)]
+    line = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 80.0)
+    return spans, line, pts, free, is_gap
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_wire_through_a_crown_is_bridged_between_its_pieces(seed):
+    """A wire's two fitted pieces either side of a crown it runs through, on one catenary: the
+    gap's wire points are taken (not its neighbour's 0.3 m beside; of a crown filled with 26 points
+    per cubic metre, what lies within the wire's tolerance, under a fifth of those taken); two pieces
+    that hang in catenaries of their own (a support between them) are not bridged."""
+    from toolbox_plugins.powerlines.core import bridge_gaps
+
+    spans, line, p, free, is_gap = _bridge_scene(np.random.default_rng(seed))
+    found = bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], free, 0.2, max_gap_m=16.0)
+    assert len(found) == 1
+    li, wire, k, *_ = found[0]
+    assert (li, wire) == (0, 0)
+    assert is_gap[k].sum() >= 0.9 * is_gap.sum() and is_gap[k].mean() >= 0.8
+    assert not np.any(np.abs(p[k, 1] - 0.3) < 0.1)
+    spans, line, p, free, is_gap = _bridge_scene(np.random.default_rng(seed), kink=True)
+    assert bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], free, 0.2, max_gap_m=16.0) == []
+    # a gap wider than max_gap_m is left alone
+    spans, line, p, free, is_gap = _bridge_scene(np.random.default_rng(seed))
+    assert bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], free, 0.2, max_gap_m=12.0) == []

@@ -1270,6 +1270,62 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
     return found
 
 
+def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_gap_m: float = 1.0,
+                sample_m: float = 0.5) -> list:
+    """The stretches of a wire between two of its fitted pieces along one line that one catenary
+    explains: where the wire runs through a crown, the shape test and the Hough lose it, the 3D
+    step fits the pieces either side, and ``grow_span_ends`` stops at the foliage. Two spans
+    (rms <= ``max_rms``) are one wire across a gap of ``min_gap_m`` to ``max_gap_m`` when their
+    plan trends meet there (within the tighter of their lateral tolerances) and one catenary fits
+    both their curves (sampled every ``sample_m``) as closely as their own points fit them (the
+    mean of their rms): at a support the two hang in different catenaries and do not. The gap's
+    ``free`` points (``p*``: off the ground, metres) on that catenary (within its points' tolerance,
+    3 x that rms, and the lateral tolerance of the trend between the two ends) are the wire's.
+    Returns [(line, wire, indices into p*, s, offsets across, fit)] per gap bridged, with fit the
+    joint (z0, s0, c, rms)."""
+    found = []
+    taken = ~np.asarray(free, bool).copy()
+    for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
+        line_spans = sorted(line_spans, key=lambda q: q.s_from)
+        for a in line_spans:
+            oa = a.offset + a.offset_slope * a.s_to
+            lat = None
+            best = None
+            for b in line_spans:
+                gap = b.s_from - a.s_to
+                if not min_gap_m <= gap <= max_gap_m:
+                    continue
+                ob = b.offset + b.offset_slope * b.s_from
+                tol = min(a.lateral_tol, b.lateral_tol)
+                if abs(ob - oa) <= tol and (best is None or gap < best[0]):
+                    best, lat = (gap, b), tol
+            if best is None:
+                continue
+            b = best[1]
+            # nothing of this wire's already in the gap (another piece, a span grown into it)
+            if any(q is not a and q is not b and q.s_to > a.s_to and q.s_from < b.s_from and
+                   abs(q.offset + q.offset_slope * 0.5 * (a.s_to + b.s_from) - oa) <= lat for q in line_spans):
+                continue
+            ss = np.r_[np.arange(a.s_from, a.s_to, sample_m), np.arange(b.s_from, b.s_to, sample_m)]
+            zz = np.r_[catenary(np.arange(a.s_from, a.s_to, sample_m), a.z0, a.s0, a.c),
+                       catenary(np.arange(b.s_from, b.s_to, sample_m), b.z0, b.s0, b.c)]
+            if len(ss) < 6:
+                continue
+            z0, s0, c, joint = fit_catenary(ss, zz)
+            noise = 0.5 * (a.rms + b.rms)
+            if joint > noise:
+                continue
+            ob = b.offset + b.offset_slope * b.s_from
+            trend = oa + (ob - oa) * (s - a.s_to) / (b.s_from - a.s_to)
+            k = np.flatnonzero((s > a.s_to) & (s < b.s_from) & ~taken & (np.abs(off - trend) <= lat) &
+                               (np.abs(pz - catenary(s, z0, s0, c)) <= 3 * noise))
+            if len(k) < 3:
+                continue
+            taken[k] = True
+            found.append((li, a.wire, k, s[k], off[k], (z0, s0, c, noise)))
+    return found
+
+
 def _contrast(tree, k, s, off, z, fit) -> float:
     """How much denser the points of ``tree`` (all the points, at ``s`` along the line, ``off``
     across it, height ``z``) are within 0.1 m of the span of the points ``k`` (its catenary

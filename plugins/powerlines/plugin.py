@@ -182,6 +182,14 @@ def _run(inputs, params, ctx):
         lines, geo, spans, keep, line_of, wire_of_pt, n_next = _next_spans(pc, low, keep, lines, geo, spans, line_of,
                                                                          wire_of_pt, params, hu, vu)
         timings["next_spans_s"] = time.perf_counter() - t
+    n_bridges = 0
+    if params["bridge_gaps"] and spans:
+        # between two pieces of a wire on one catenary (it ran through a crown): the wire
+        t = time.perf_counter()
+        low = off[hag[off] >= 1.0]
+        lines, geo, spans, keep, line_of, wire_of_pt, n_bridges = _next_spans(
+            pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, bridges=True)
+        timings["bridge_gaps_s"] = time.perf_counter() - t
 
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
     # footprint is one of its arms, not a conductor
@@ -296,7 +304,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -545,17 +553,18 @@ def _sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu,
     return lines, geo, spans, line_of, wire_of_pt, len(geo) - n_before
 
 
-def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, bridges=False):
     """``next_spans`` of the wires found among the points ``low`` (indices into ``pc``: off the
-    ground), added as spans of those wires; their points join ``keep`` (relabelled where they are
-    candidates on no wire) and each conductor's 2D line is stretched over its new spans.
+    ground), or with ``bridges`` their ``bridge_gaps``, added as spans of those wires; their points
+    join ``keep`` (relabelled where they are candidates on no wire) and each conductor's 2D line is
+    stretched over its new spans.
     Returns (lines, geo, spans, keep, line_of, wire_of_pt, number of spans added)."""
     import dataclasses
 
     import numpy as np
     from shapely.geometry import LineString
 
-    from .core import _span, next_spans
+    from .core import _span, bridge_gaps, next_spans
 
     # each low point's conductor and wire so far (-1: none; free: on no wire yet)
     at_low = np.full(len(pc), -1, np.int64)
@@ -564,9 +573,13 @@ def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, h
     low_line, low_wire = np.full(len(low), -1, np.int64), np.full(len(low), -1, np.int64)
     low_line[at_low[keep[in_low]]], low_wire[at_low[keep[in_low]]] = line_of[in_low], wire_of_pt[in_low]
     free = low_line < 0
-    found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
-                       max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
-                       min_span_m=params["s_min_m"], line_of=low_line, wire_of=low_wire)
+    if bridges:
+        found = bridge_gaps(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
+                            max_gap_m=2 * params["s_min_m"])
+    else:
+        found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
+                           max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
+                           min_span_m=params["s_min_m"], line_of=low_line, wire_of=low_wire)
     if not found:
         return lines, geo, spans, keep, line_of, wire_of_pt, 0
     spans, geo = list(spans), list(geo)
@@ -1234,6 +1247,8 @@ def toolbox_algorithms():
             Parameter("next_spans", bool, True, "past each wire's outermost span, search its plan trend for the "
                       "next span (a catenary meeting it at its support, S_min long or more, a concentration of "
                       "points, not a crown's edge): a wire seen sparsely past the last support the Hough found"),
+            Parameter("bridge_gaps", bool, True, "between two pieces of a wire up to 2 x s_min_m apart that one "
+                      "catenary fits as closely as their own points, take the points on it: a wire through a crown"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
