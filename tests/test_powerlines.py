@@ -2179,3 +2179,16 @@ def test_a_wire_through_a_crown_is_bridged_between_its_pieces(seed):
     # a gap wider than max_gap_m is left alone
     spans, line, p, free, is_gap = _bridge_scene(np.random.default_rng(seed))
     assert bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], free, 0.2, max_gap_m=12.0) == []
+
+
+def test_a_short_stub_runs_along_a_line_its_ends_lie_on():
+    """A 9.5 m stub the Hough leant 1.4 deg off its wire runs along the long line both its ends
+    lie within band_m of (its angle is loose over that length); a 30 m line at that angle, its
+    ends as close, crosses it."""
+    from toolbox_plugins.powerlines.plugin import _along
+
+    h = (np.array([-100.0, 0.0]), np.array([1.0, 0.0]), 0.0, 600.0)
+    d = np.array([np.cos(np.radians(1.4)), np.sin(np.radians(1.4))])
+    assert _along((np.array([0.0, -0.1]), d, 0.0, 9.5), h, 0.4)
+    assert not _along((np.array([0.0, -0.36]), d, 0.0, 30.0), h, 0.4)
+    assert not _along((np.array([0.0, 0.3]), d, 0.0, 9.5), h, 0.4)  # its far end 0.53 m off

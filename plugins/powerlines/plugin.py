@@ -1034,6 +1034,9 @@ def _along(g, h, band_m: float, max_angle_deg: float = 1.0) -> bool:
     import numpy as np
 
     (a, d, t0, t1), (b, e, _, _) = g, h
+    # a short line's Hough angle is loose (a 10 m stub leant 1.4 deg off its wire): its ends within
+    # band_m of the other line tell, up to the angle that band allows over its length
+    max_angle_deg = max(max_angle_deg, float(np.degrees(np.arctan2(band_m, t1 - t0))))
     if abs(float(d @ e)) < np.cos(np.radians(max_angle_deg)):
         return False
     normal = np.array([-e[1], e[0]])
