@@ -1687,8 +1687,9 @@ def test_a_wire_seen_from_one_side_gets_its_own_heading(tmp_path):
 def test_a_line_ending_at_a_support_crosses_nothing_past_it():
     """The method's 5 m extension carries a line that ends at its last pole on to the line beside
     the pole (the synthetic mobile double circuit's 2 false crossings); with the supports found,
-    a line ending at one crosses nothing more than a metre past that end. A line that runs on
-    through the other, or ends within a metre of it, still crosses it."""
+    a line ending at one crosses nothing more than a metre past that end, unless still short of
+    the support by more than a strain insulator. A line that runs on through the other, or ends
+    within a metre of it, still crosses it."""
     a = (np.array([0.0, 0.0]), np.array([1.0, 0.0]))
     b = (np.array([50.0, -50.0]), np.array([0.0, 1.0]))
     seg_a = [(np.array([0.0, 0.0]), np.array([100.0, 0.0]))]
@@ -1700,6 +1701,10 @@ def test_a_line_ending_at_a_support_crosses_nothing_past_it():
     # a support that is not at the line's end (30 m along it) changes nothing
     seg_b = [(np.array([50.0, -50.0]), np.array([50.0, -2.0]))]
     assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, -30.0, 3.0)])) == 1
+    # b's wire seen up to 3 m short of its pole (next to the structure): a line passing 1 m before
+    # the pole crosses it; one passing within the strain insulator's 0.5 m of the pole does not
+    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, 1.0, 3.5)])) == 1
+    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, 0.3, 3.5)])) == 0
 
 
 def test_false_crossings_are_those_far_from_every_true_one():

@@ -7,6 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
+# how far short of its support's centre a wire ending there stops in plan (a dead-end string of
+# insulators holds it off the arm)
+STRAIN_INSULATOR_M = 0.5
+
 
 def intersect(p1, d1, p2, d2):
     """Intersection of two infinite lines (point, direction); None when (nearly) parallel."""
@@ -27,26 +31,32 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
 
     ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). With ``supports``
     [(x, y, reach_m)] (towers and poles found), an intersection more than ``beyond_m`` past the
-    end of a line's segments, where that end is within a support's reach, is not a crossing: the
-    line ends at the support (the method's crossings are not pylon positions), and the extension
-    would carry it on to the line beside the pole. Returns a list of dicts (x, y, n_lines,
+    end of a line's segments, where that end is within a support's reach, and within
+    STRAIN_INSULATOR_M of that support or past it, is not a crossing: the line ends at the support
+    (the method's crossings are not pylon positions), and the extension would carry it on to the
+    line beside the pole. Returns a list of dicts (x, y, n_lines,
     angle_deg, lines).
     """
     sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
     sup_reach = np.asarray([s_[2] for s_ in supports], float) if supports else np.zeros(0)
-    # per line, its segments' first and last position along it, and whether each end is at a support
+    # per line, how far along it each end at a support reaches: beyond_m past its segments, or up
+    # to the support less a strain insulator (the wire runs on to its arm, unseen over the last
+    # metres next to the structure, and a line crossing there crosses it)
     extents = []
     for (a, d), segs in zip(lines, segments) if len(sup) else ():
         a, d = np.asarray(a, float), np.asarray(d, float)
         t = np.array([(np.asarray(e, float) - a) @ d for seg in segs for e in seg]) if len(segs) else np.zeros(1)
-        at = [len(segs) > 0 and bool(np.any(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach))
-              for t_end in (t.min(), t.max())]
-        extents.append((a, d, t.min(), t.max(), at))
+        lim = []
+        for t_end, side in ((t.min(), -1.0), (t.max(), 1.0)):
+            near = np.flatnonzero(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach) if len(segs) else []
+            lim.append(None if not len(near) else side * max(
+                side * t_end + beyond_m, float(np.max(side * ((sup[near] - a) @ d))) - STRAIN_INSULATOR_M))
+        extents.append((a, d, lim))
 
     def ends_at_support(k, p):
-        a, d, t0, t1, (at0, at1) = extents[k]
+        a, d, (lim0, lim1) = extents[k]
         t = (p - a) @ d
-        return (at0 and t < t0 - beyond_m) or (at1 and t > t1 + beyond_m)
+        return (lim0 is not None and t < lim0) or (lim1 is not None and t > lim1)
 
     found = []
     for i in range(len(lines)):
