@@ -1707,6 +1707,24 @@ def test_a_line_ending_at_a_support_crosses_nothing_past_it():
     assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, 0.3, 3.5)])) == 0
 
 
+def test_lines_that_both_end_at_a_support_do_not_cross_there():
+    """At an angle tower a line's spans turn by 11 deg (AHN4 12AN2_20): the plan lines of the span
+    ending at it and the one leaving it meet within its footprint, half a metre past the seen end
+    of each, which is no crossing; the same lines with no support there, or ending at different
+    supports, cross."""
+    d1 = np.array([np.sin(np.radians(21.0)), np.cos(np.radians(21.0))])
+    d2 = np.array([np.sin(np.radians(10.0)), np.cos(np.radians(10.0))])
+    meet = np.array([0.0, 0.0])
+    seg1 = [(meet - 100 * d1, meet - 0.5 * d1)]
+    seg2 = [(meet + 0.5 * d2, meet + 100 * d2)]
+    lines = [(meet - 100 * d1, d1), (meet + 0.5 * d2, d2)]
+    tower = (2.5, 0.0, 6.0)  # its centre 2.5 m beside where they meet, reaching 6 m
+    assert len(crossings(lines, [seg1, seg2])) == 1
+    assert len(crossings(lines, [seg1, seg2], supports=[tower])) == 0
+    # each ending at a support of its own (two poles 9 m apart, either side of where they meet)
+    assert len(crossings(lines, [seg1, seg2], supports=[(-3.0, -4.0, 4.6), (3.0, 4.0, 4.6)])) == 1
+
+
 def test_false_crossings_are_those_far_from_every_true_one():
     truth = {"conductor_lines_2d": [{"a": [0, 0], "b": [10, 0], "offset_m": 0.0},
                                     {"a": [5, -5], "b": [5, 5], "offset_m": 0.0},

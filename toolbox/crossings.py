@@ -34,7 +34,8 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
     end of a line's segments, where that end is within a support's reach, and within
     STRAIN_INSULATOR_M of that support or past it, is not a crossing: the line ends at the support
     (the method's crossings are not pylon positions), and the extension would carry it on to the
-    line beside the pole. Returns a list of dicts (x, y, n_lines,
+    line beside the pole; nor is one of two lines that both end at a support, within its reach.
+    Returns a list of dicts (x, y, n_lines,
     angle_deg, lines).
     """
     sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
@@ -46,17 +47,23 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
     for (a, d), segs in zip(lines, segments) if len(sup) else ():
         a, d = np.asarray(a, float), np.asarray(d, float)
         t = np.array([(np.asarray(e, float) - a) @ d for seg in segs for e in seg]) if len(segs) else np.zeros(1)
-        lim = []
+        lim, ends_at = [], set()
         for t_end, side in ((t.min(), -1.0), (t.max(), 1.0)):
             near = np.flatnonzero(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach) if len(segs) else []
             lim.append(None if not len(near) else side * max(
                 side * t_end + beyond_m, float(np.max(side * ((sup[near] - a) @ d))) - STRAIN_INSULATOR_M))
-        extents.append((a, d, lim))
+            ends_at.update(int(k) for k in near)
+        extents.append((a, d, lim, ends_at))
 
     def ends_at_support(k, p):
-        a, d, (lim0, lim1) = extents[k]
+        a, d, (lim0, lim1), _ = extents[k]
         t = (p - a) @ d
         return (lim0 is not None and t < lim0) or (lim1 is not None and t > lim1)
+
+    def turns_at_support(i, j, p):
+        # both end at one support and meet within its reach: one line's wires turning there (an
+        # angle tower), or its arms
+        return any(np.hypot(*(sup[k] - p)) <= sup_reach[k] for k in extents[i][3] & extents[j][3])
 
     found = []
     for i in range(len(lines)):
@@ -64,7 +71,7 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
             p = intersect(lines[i][0], lines[i][1], lines[j][0], lines[j][1])
             if p is None:
                 continue
-            if len(sup) and (ends_at_support(i, p) or ends_at_support(j, p)):
+            if len(sup) and (ends_at_support(i, p) or ends_at_support(j, p) or turns_at_support(i, j, p)):
                 continue
             ok = False
             for a1, b1 in segments[i]:
