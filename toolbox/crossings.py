@@ -35,8 +35,7 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
     STRAIN_INSULATOR_M of that support or past it, is not a crossing: the line ends at the support
     (the method's crossings are not pylon positions), and the extension would carry it on to the
     line beside the pole; nor is one of two lines that both end at a support, within its reach.
-    Returns a list of dicts (x, y, n_lines,
-    angle_deg, lines).
+    Returns a list of dicts (x, y, n_lines, angle_deg, lines).
     """
     sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
     sup_reach = np.asarray([s_[2] for s_ in supports], float) if supports else np.zeros(0)

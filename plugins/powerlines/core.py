@@ -1289,33 +1289,28 @@ def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float
         line_spans = sorted(line_spans, key=lambda q: q.s_from)
         for a in line_spans:
             oa = a.offset + a.offset_slope * a.s_to
-            lat = None
-            best = None
+            best = None  # (gap, the next piece, its offset at the gap, the lateral tolerance)
             for b in line_spans:
                 gap = b.s_from - a.s_to
-                if not min_gap_m <= gap <= max_gap_m:
-                    continue
                 ob = b.offset + b.offset_slope * b.s_from
-                tol = min(a.lateral_tol, b.lateral_tol)
-                if abs(ob - oa) <= tol and (best is None or gap < best[0]):
-                    best, lat = (gap, b), tol
+                lat = min(a.lateral_tol, b.lateral_tol)
+                if min_gap_m <= gap <= max_gap_m and abs(ob - oa) <= lat and (best is None or gap < best[0]):
+                    best = (gap, b, ob, lat)
             if best is None:
                 continue
-            b = best[1]
+            _, b, ob, lat = best
             # nothing of this wire's already in the gap (another piece, a span grown into it)
             if any(q is not a and q is not b and q.s_to > a.s_to and q.s_from < b.s_from and
                    abs(q.offset + q.offset_slope * 0.5 * (a.s_to + b.s_from) - oa) <= lat for q in line_spans):
                 continue
-            ss = np.r_[np.arange(a.s_from, a.s_to, sample_m), np.arange(b.s_from, b.s_to, sample_m)]
-            zz = np.r_[catenary(np.arange(a.s_from, a.s_to, sample_m), a.z0, a.s0, a.c),
-                       catenary(np.arange(b.s_from, b.s_to, sample_m), b.z0, b.s0, b.c)]
-            if len(ss) < 6:
+            sa, sb = np.arange(a.s_from, a.s_to, sample_m), np.arange(b.s_from, b.s_to, sample_m)
+            if len(sa) + len(sb) < 6:
                 continue
-            z0, s0, c, joint = fit_catenary(ss, zz)
+            z0, s0, c, joint = fit_catenary(np.r_[sa, sb], np.r_[catenary(sa, a.z0, a.s0, a.c),
+                                                                catenary(sb, b.z0, b.s0, b.c)])
             noise = 0.5 * (a.rms + b.rms)
             if joint > noise:
                 continue
-            ob = b.offset + b.offset_slope * b.s_from
             trend = oa + (ob - oa) * (s - a.s_to) / (b.s_from - a.s_to)
             k = np.flatnonzero((s > a.s_to) & (s < b.s_from) & ~taken & (np.abs(off - trend) <= lat) &
                                (np.abs(pz - catenary(s, z0, s0, c)) <= 3 * noise))

@@ -187,8 +187,8 @@ def _run(inputs, params, ctx):
         # between two pieces of a wire on one catenary (it ran through a crown): the wire
         t = time.perf_counter()
         low = off[hag[off] >= 1.0]
-        lines, geo, spans, keep, line_of, wire_of_pt, n_bridges = _next_spans(
-            pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, bridges=True)
+        lines, geo, spans, keep, line_of, wire_of_pt, n_bridges = _bridge_gaps(
+            pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu)
         timings["bridge_gaps_s"] = time.perf_counter() - t
 
     # 6. pylons: tall columns under the lines where spans end; a line that never leaves a tower's
@@ -553,33 +553,55 @@ def _sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu,
     return lines, geo, spans, line_of, wire_of_pt, len(geo) - n_before
 
 
-def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, bridges=False):
+def _labels_of_low(low, keep, line_of, wire_of_pt, n_points):
+    """Each of the points ``low`` (indices into the cloud of ``n_points``): its conductor and wire
+    so far (-1: on no wire)."""
+    import numpy as np
+
+    at_low = np.full(n_points, -1, np.int64)
+    at_low[low] = np.arange(len(low))
+    in_low = at_low[keep] >= 0
+    low_line, low_wire = np.full(len(low), -1, np.int64), np.full(len(low), -1, np.int64)
+    low_line[at_low[keep[in_low]]], low_wire[at_low[keep[in_low]]] = line_of[in_low], wire_of_pt[in_low]
+    return low_line, low_wire
+
+
+def _next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
     """``next_spans`` of the wires found among the points ``low`` (indices into ``pc``: off the
-    ground), or with ``bridges`` their ``bridge_gaps``, added as spans of those wires; their points
-    join ``keep`` (relabelled where they are candidates on no wire) and each conductor's 2D line is
-    stretched over its new spans.
+    ground), added by ``_add_found_spans``. Returns what it returns."""
+    from .core import next_spans
+
+    low_line, low_wire = _labels_of_low(low, keep, line_of, wire_of_pt, len(pc))
+    found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, low_line < 0,
+                       params["max_rms_3d_m"], max_gap_m=2 * params["v_max_m"],
+                       reach_m=max(60.0, 8 * params["s_min_m"]), min_span_m=params["s_min_m"], line_of=low_line,
+                       wire_of=low_wire)
+    return _add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found, hu, vu)
+
+
+def _bridge_gaps(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+    """``bridge_gaps`` of the wires found among the points ``low`` (indices into ``pc``: off the
+    ground), added by ``_add_found_spans``. Returns what it returns."""
+    from .core import bridge_gaps
+
+    low_line, _ = _labels_of_low(low, keep, line_of, wire_of_pt, len(pc))
+    found = bridge_gaps(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, low_line < 0,
+                        params["max_rms_3d_m"], max_gap_m=2 * params["s_min_m"])
+    return _add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found, hu, vu)
+
+
+def _add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found, hu, vu):
+    """Spans ``found`` past or between a wire's fitted ones ([(line, wire, indices into ``low``, s,
+    offsets, fit)]) added as chained spans of those wires; their points join ``keep`` (relabelled
+    where they are candidates on no wire) and each conductor's 2D line is stretched over them.
     Returns (lines, geo, spans, keep, line_of, wire_of_pt, number of spans added)."""
     import dataclasses
 
     import numpy as np
     from shapely.geometry import LineString
 
-    from .core import _span, bridge_gaps, next_spans
+    from .core import _span
 
-    # each low point's conductor and wire so far (-1: none; free: on no wire yet)
-    at_low = np.full(len(pc), -1, np.int64)
-    at_low[low] = np.arange(len(low))
-    in_low = at_low[keep] >= 0
-    low_line, low_wire = np.full(len(low), -1, np.int64), np.full(len(low), -1, np.int64)
-    low_line[at_low[keep[in_low]]], low_wire[at_low[keep[in_low]]] = line_of[in_low], wire_of_pt[in_low]
-    free = low_line < 0
-    if bridges:
-        found = bridge_gaps(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
-                            max_gap_m=2 * params["s_min_m"])
-    else:
-        found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, free, params["max_rms_3d_m"],
-                           max_gap_m=2 * params["v_max_m"], reach_m=max(60.0, 8 * params["s_min_m"]),
-                           min_span_m=params["s_min_m"], line_of=low_line, wire_of=low_wire)
     if not found:
         return lines, geo, spans, keep, line_of, wire_of_pt, 0
     spans, geo = list(spans), list(geo)
