@@ -1384,6 +1384,31 @@ def test_ribbons_are_wires_not_roofs():
     assert r[:600].all() and not r[630:].any()
 
 
+def test_a_stack_of_cables_is_a_ribbon_a_facade_and_a_terraced_roof_are_not():
+    """Three cables one above another 0.3 m apart (a joint-use pole's communication cables,
+    sagging together) are locally a vertical plane, but their heights fall into bands with empty
+    space between them; a wall strip of the same size fills its height, and a roof of two flat
+    terraces 0.5 m apart is wide in plan."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines.core import ribbons
+
+    rng = np.random.default_rng(5)
+    s = rng.uniform(0, 40, 3 * 150)
+    sag = 0.5 - 0.5 * ((s - 20.0) / 20.0) ** 2
+    cables = np.column_stack([s, rng.normal(0, 0.03, 450), np.repeat([5.6, 5.3, 5.0], 150) - sag
+                              + rng.normal(0, 0.03, 450)])
+    wall = np.column_stack([rng.uniform(0, 40, 450), 20 + rng.normal(0, 0.03, 450), rng.uniform(5.0, 5.6, 450)])
+    u = rng.uniform(0, 40, 900)
+    terraces = np.column_stack([u, 40 + rng.uniform(0, 4, 900), np.where(rng.uniform(0, 1, 900) < 0.5, 8.0, 8.5)
+                                + rng.normal(0, 0.02, 900)])
+    xyz = np.r_[cables, wall, terraces]
+    dist, idx = cKDTree(xyz).query(xyz, k=12)
+    flat = np.ones(len(xyz), bool)
+    r = ribbons(xyz, idx, dist, flat, flat)
+    assert r[:450].all() and not r[450:].any()
+
+
 def test_a_ribbon_linked_to_a_crown_is_a_ribbon_where_it_runs_alone():
     """The same ribbon with a crown grown into it at one place: the linked set is no ribbon as a
     whole, but judged piece by piece along it every piece away from the crown is."""

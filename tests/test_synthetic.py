@@ -228,6 +228,27 @@ def test_distribution_variant_trees_under_and_beside_the_line():
     assert all(55 < c["angle_deg"] < 85 for c in s.truth["crossings"])
 
 
+def test_joint_use_poles_carry_a_stack_of_communication_cables():
+    """comm_cables: the low-voltage line's poles carry cables one above another, comm_spacing_m
+    apart, under its wires and clear of the road (4.5 m over the ground at the poles at least);
+    they share one 2D line and cross under line A's wires."""
+    s = make_scene("corridor", seed=4, density_ppm2=3.0, line_variant="distribution", comm_cables=3,
+                   comm_spacing_m=0.3)
+    comm = [w for w in s.truth["wires"] if w["kind"] == "communication"]
+    assert [w["line"] for w in comm] == ["B"] * 3 and len({round(w["offset_m"], 3) for w in comm}) == 1
+    span0 = {sp["wire_id"]: sp for sp in s.truth["spans"] if sp["span"] == 0 and sp["line"] == "B"}
+    z = sorted(span0[w["id"]]["a"][2] for w in comm)
+    assert np.allclose(np.diff(z), 0.3) and max(z) < min(span0[w["id"]]["a"][2] for w in s.truth["wires"]
+                                                         if w["line"] == "B" and w["kind"] == "phase")
+    pole = next(p for p in s.truth["pylons"] if p["line"] == "B")
+    ends = [sp for sp in s.truth["spans"] if sp["line"] == "B" and sp["wire_id"] in span0
+            and np.hypot(sp["a"][0] - pole["x"], sp["a"][1] - pole["y"]) < 1.0]
+    assert ends and min(sp["a"][2] for sp in ends) - pole["z"] >= 4.5
+    assert len([l for l in s.truth["conductor_lines_2d"] if l["line"] == "B"]) == 3  # L, R and the stack
+    plain = make_scene("corridor", seed=4, density_ppm2=3.0, line_variant="distribution")
+    assert len(s.truth["crossings"]) == len(plain.truth["crossings"]) + 3
+
+
 @pytest.mark.parametrize("n, shape", [(1, "single"), (3, "triangle"), (4, "square")])
 def test_bundle_variants(n, shape):
     s = make_scene("corridor", seed=3, density_ppm2=3.0, bundle=n, bundle_spacing_m=0.4)

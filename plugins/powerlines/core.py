@@ -163,13 +163,13 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
         comp = np.flatnonzero(lab == k)
         if len(comp) < min_points:
             continue
-        if _is_ribbon(xyz[comp, :2], bin_m, max_band_m, floor_share):
+        if _is_ribbon(xyz[comp], bin_m, max_band_m, floor_share):
             out[comp] = True
             continue
         # a ribbon linked to a crown or to a crossing line is a ribbon where it runs alone:
         # the set judged again piece by piece along its main axis
         for m in _pieces_along(xyz, comp, piece_m):
-            if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m, :2], bin_m, max_band_m, floor_share):
+            if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m], bin_m, max_band_m, floor_share):
                 out[m] = True
     return out & planar
 
@@ -226,13 +226,27 @@ def _pieces_along(xyz, comp, piece_m: float) -> list[np.ndarray]:
     return np.split(comp[np.argsort(piece, kind="stable")], np.cumsum(np.bincount(piece))[:-1])
 
 
-def _is_ribbon(xy, bin_m, max_band_m, floor_share) -> bool:
+def _is_ribbon(xyz, bin_m, max_band_m, floor_share) -> bool:
     """Points that, across their main axis in plan, fall into two or more bands no wider than
-    ``max_band_m`` with empty bins (under ``floor_share`` of the fullest) between them."""
-    q = xy - xy.mean(axis=0)
+    ``max_band_m`` with empty bins (under ``floor_share`` of the fullest) between them: wires side
+    by side; or, within one such band in plan, into two or more such bands in height about their
+    trend along it: wires one above another (a joint-use pole's communication cables). A roof
+    fills its width, a facade its height; terraced roofs are wide in plan."""
+    q = xyz[:, :2] - xyz[:, :2].mean(axis=0)
     _, _, vq = np.linalg.svd(q, full_matrices=False)
-    across = q @ vq[1]
-    counts = np.bincount(((across - across.min()) / bin_m).astype(np.int64))
+    along, across = q @ vq[0], q @ vq[1]
+    if _bands(across, bin_m, max_band_m, floor_share):
+        return True
+    if np.subtract(*np.percentile(across, [98, 2])) > max_band_m:
+        return False
+    slope, icpt = line_fit(along, xyz[:, 2])
+    return _bands(xyz[:, 2] - slope * along - icpt, bin_m, max_band_m, floor_share)
+
+
+def _bands(values, bin_m, max_band_m, floor_share) -> bool:
+    """Whether ``values`` fall into two or more bands no wider than ``max_band_m`` with empty
+    bins (under ``floor_share`` of the fullest) between them."""
+    counts = np.bincount(((values - values.min()) / bin_m).astype(np.int64))
     full = counts >= floor_share * counts.max()
     # runs of full bins: their widths, and whether there are at least two
     edges = np.flatnonzero(np.diff(np.r_[0, full.astype(np.int8), 0]))

@@ -43,7 +43,8 @@ def _run(inputs, params, ctx):
                        line_variant=params["line_variant"], phase_spacing_m=params["phase_spacing_m"],
                        bundle=params["bundle"], bundle_spacing_m=params["bundle_spacing_m"],
                        roof_set=params["roof_set"], span_m=params["span_m"], slope_pct=params["slope_pct"],
-                       scanner=params["scanner"], track_offset_m=params["track_offset_m"])
+                       scanner=params["scanner"], track_offset_m=params["track_offset_m"],
+                       comm_cables=params["comm_cables"], comm_spacing_m=params["comm_spacing_m"])
     pc = PointCloud(scene.x, scene.y, scene.z, fields=scene.fields, crs=crs, source=f"synthetic-scene:{scene.kind}:{scene.seed}",
                     meta={"creation_date": datetime.date(2026, 1, 1)})
     dtm = Raster(scene.dtm, scene.dtm_transform, crs=crs, nodata=float("nan"), style="dtm",
@@ -133,6 +134,11 @@ def toolbox_algorithms():
                       minimum=-100.0, maximum=100.0),
             Parameter("phase_spacing_m", float, 0.6, "ribbon: the distance between neighbouring phases", unit="m",
                       minimum=0.2, maximum=3.0),
+            Parameter("comm_cables", int, 0, "distribution: communication cables on the low-voltage line's poles, "
+                      "one above another under its wires (joint-use poles: a vertical ribbon of wires)",
+                      minimum=0, maximum=4),
+            Parameter("comm_spacing_m", float, 0.3, "distribution: the height between neighbouring communication "
+                      "cables", unit="m", minimum=0.2, maximum=1.5),
             Parameter("bundle", int, 2, "double-circuit: sub-conductors per phase (1; 2 side by side; 3 a "
                       "triangle; 4 a square)", minimum=1, maximum=4),
             Parameter("bundle_spacing_m", float, 0.6, "double-circuit: the distance between sub-conductors",

@@ -447,6 +447,16 @@ def wood_pole(height_m=11.0, arm_half_m=1.4) -> TowerModel:
     return TowerModel("pole", np.array(segs, float), att, height_m)
 
 
+def joint_use_pole(height_m=7.0, arm_half_m=0.6, cables=3, spacing_m=0.3, drop_m=0.8) -> TowerModel:
+    """A low-voltage pole that also carries ``cables`` communication cables one above another,
+    ``spacing_m`` apart on its side, the highest ``drop_m`` under its wires (a vertical ribbon)."""
+    pole = wood_pole(height_m, arm_half_m)
+    att = dict(pole.attachments)
+    for k in range(cables):
+        att[f"T{k}"] = (0.15, height_m - 0.9 - drop_m - k * spacing_m)
+    return TowerModel("joint-use pole", pole.segments, att, height_m)
+
+
 def compact_pole(height_m=11.0, phases=3, spacing_m=0.6) -> TowerModel:
     """A compact line's pole: one horizontal arm carrying ``phases`` conductors ``spacing_m``
     apart at one height (a horizontal ribbon of wires)."""

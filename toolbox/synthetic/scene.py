@@ -88,7 +88,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
                origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", line_variant: str = "double-circuit",
                phase_spacing_m: float = 0.6, bundle: int = 2, bundle_spacing_m: float = 0.6,
                roof_set: str = "basic", span_m: float | None = None, slope_pct: float = 0.0,
-               scanner: str = "airborne", track_offset_m: float = 6.0, full_density_range_m: float = 10.0) -> Scene:
+               scanner: str = "airborne", track_offset_m: float = 6.0, full_density_range_m: float = 10.0,
+               comm_cables: int = 0, comm_spacing_m: float = 0.3) -> Scene:
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}")
     if roof_set not in ROOF_SETS:
@@ -111,7 +112,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     elif line_variant == "ribbon":
         lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
     elif line_variant == "distribution":
-        lines = _distribution_lines(W, H, rng, terrain)
+        lines = _distribution_lines(W, H, rng, terrain, comm_cables, comm_spacing_m)
     else:
         lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m, span_m=span_m,
                              stacked=line_variant == "stacked")
@@ -425,10 +426,13 @@ def _ribbon_lines(W, H, rng, terrain, spacing_m):
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 800.0} for a in ("L", "R")], "voltage_kv": 20}]
 
 
-def _distribution_lines(W, H, rng, terrain):
+def _distribution_lines(W, H, rng, terrain, comm_cables: int = 0, comm_spacing_m: float = 0.3):
     """Line A: a medium-voltage line, three wires on 9 m poles, spans of 40-50 m, trees trimmed
     2-3 m below its wires and a row of trees beside it. Line B: a low-voltage line, two wires on
-    7 m poles, crossing it at 60-80 degrees."""
+    7 m poles, crossing it at 60-80 degrees; with ``comm_cables``, its poles are joint-use poles
+    carrying that many communication cables one above another, ``comm_spacing_m`` apart."""
+    from .objects import joint_use_pole
+
     ang_a = np.radians(rng.uniform(3, 8))
     a0 = np.array([-20.0, 0.45 * H - 0.5 * W * np.tan(ang_a)])
     dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
@@ -440,8 +444,10 @@ def _distribution_lines(W, H, rng, terrain):
     return [{"name": "A", "model": wood_pole(9.0, 1.4), "towers": poles_a, "dir": dir_a, "voltage_kv": 10,
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 500.0} for a in ("L", "C", "R")],
              "trim_m": (5.0, 6.0), "tree_row_m": (4.0, 8.0)},
-            {"name": "B", "model": wood_pole(7.0, 0.6), "towers": poles_b, "dir": dir_b, "voltage_kv": 0.4,
-             "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 400.0} for a in ("L", "R")]}]
+            {"name": "B", "model": joint_use_pole(7.0, 0.6, comm_cables, comm_spacing_m), "towers": poles_b,
+             "dir": dir_b, "voltage_kv": 0.4,
+             "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 400.0} for a in ("L", "R")]
+             + [{"attach": f"T{k}", "dx": 0.0, "kind": "communication", "c": 400.0} for k in range(comm_cables)]}]
 
 
 def _poles_along(start, direction, first_m, span_m, W, H, terrain):
