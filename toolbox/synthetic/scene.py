@@ -429,8 +429,9 @@ def _ribbon_lines(W, H, rng, terrain, spacing_m):
 def _distribution_lines(W, H, rng, terrain, comm_cables: int = 0, comm_spacing_m: float = 0.3):
     """Line A: a medium-voltage line, three wires on 9 m poles, spans of 40-50 m, trees trimmed
     2-3 m below its wires and a row of trees beside it. Line B: a low-voltage line, two wires on
-    7 m poles, crossing it at 60-80 degrees; with ``comm_cables``, its poles are joint-use poles
-    carrying that many communication cables one above another, ``comm_spacing_m`` apart."""
+    7 m poles, crossing it at 60-80 degrees; with ``comm_cables``, its poles are 8 m joint-use
+    poles carrying that many communication cables one above another, ``comm_spacing_m`` apart,
+    the highest 0.8 m under its wires."""
     from .objects import joint_use_pole
 
     ang_a = np.radians(rng.uniform(3, 8))
@@ -444,7 +445,7 @@ def _distribution_lines(W, H, rng, terrain, comm_cables: int = 0, comm_spacing_m
     return [{"name": "A", "model": wood_pole(9.0, 1.4), "towers": poles_a, "dir": dir_a, "voltage_kv": 10,
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 500.0} for a in ("L", "C", "R")],
              "trim_m": (5.0, 6.0), "tree_row_m": (4.0, 8.0)},
-            {"name": "B", "model": joint_use_pole(7.0, 0.6, comm_cables, comm_spacing_m), "towers": poles_b,
+            {"name": "B", "model": joint_use_pole(8.0 if comm_cables else 7.0, 0.6, comm_cables, comm_spacing_m), "towers": poles_b,
              "dir": dir_b, "voltage_kv": 0.4,
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 400.0} for a in ("L", "R")]
              + [{"attach": f"T{k}", "dx": 0.0, "kind": "communication", "c": 400.0} for k in range(comm_cables)]}]
