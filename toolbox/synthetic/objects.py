@@ -447,7 +447,7 @@ def wood_pole(height_m=11.0, arm_half_m=1.4) -> TowerModel:
     return TowerModel("pole", np.array(segs, float), att, height_m)
 
 
-def joint_use_pole(height_m=7.0, arm_half_m=0.6, cables=3, spacing_m=0.3, drop_m=0.8) -> TowerModel:
+def joint_use_pole(height_m=8.0, arm_half_m=0.6, cables=3, spacing_m=0.3, drop_m=0.8) -> TowerModel:
     """A low-voltage pole that also carries ``cables`` communication cables one above another,
     ``spacing_m`` apart on its side, the highest ``drop_m`` under its wires (a vertical ribbon)."""
     pole = wood_pole(height_m, arm_half_m)

@@ -445,8 +445,8 @@ def _distribution_lines(W, H, rng, terrain, comm_cables: int = 0, comm_spacing_m
     return [{"name": "A", "model": wood_pole(9.0, 1.4), "towers": poles_a, "dir": dir_a, "voltage_kv": 10,
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 500.0} for a in ("L", "C", "R")],
              "trim_m": (5.0, 6.0), "tree_row_m": (4.0, 8.0)},
-            {"name": "B", "model": joint_use_pole(8.0 if comm_cables else 7.0, 0.6, comm_cables, comm_spacing_m), "towers": poles_b,
-             "dir": dir_b, "voltage_kv": 0.4,
+            {"name": "B", "model": joint_use_pole(8.0, 0.6, comm_cables, comm_spacing_m) if comm_cables
+             else wood_pole(7.0, 0.6), "towers": poles_b, "dir": dir_b, "voltage_kv": 0.4,
              "wires": [{"attach": a, "dx": 0.0, "kind": "phase", "c": 400.0} for a in ("L", "R")]
              + [{"attach": f"T{k}", "dx": 0.0, "kind": "communication", "c": 400.0} for k in range(comm_cables)]}]
 
