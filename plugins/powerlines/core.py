@@ -1158,8 +1158,6 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     stop at the first whose column (``column_m`` in plan, ``column_dz_m`` up and down) holds more
     points off the catenary than on it: the pole, arm or crown the wire meets. ``px, py, pz``: the
     off-ground points, ``free`` those not on a wire yet. ``lines`` as for conductors_3d."""
-    from scipy.spatial import cKDTree
-
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
@@ -1397,8 +1395,6 @@ def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
                 far[nearer] = np.abs(off[nearer] - sp.offset - sp.offset_slope * s[nearer]) > sp.lateral_tol
             off_trend[m[far]] = True
     if clutter_xyz is not None and off_trend.any():
-        from scipy.spatial import cKDTree
-
         k = np.flatnonzero(off_trend)
         if len(clutter_xyz):
             d = cKDTree(clutter_xyz).query(np.column_stack([px[k], py[k], pz[k]]), distance_upper_bound=clutter_m)[0]
@@ -1419,8 +1415,6 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
     wire beside other wires or a pole has points on a few sides only, and a wall or roof 0.2 m or
     more away spans at most 4 (an arc of 2 arccos(0.2 / 0.5) = 132 degrees). A point on no
     fitting span of its wire is kept. ``lines`` as for conductors_3d."""
-    from scipy.spatial import cKDTree
-
     foliage = np.zeros(len(px), bool)
     if not len(around_xyz) or not (line_of >= 0).any():
         return foliage

@@ -1170,7 +1170,7 @@ def toolbox_algorithms():
         id="powerlines", title="Power-line conductors from a raw point cloud", run=_run,
         description=(
             "The method's chain: ground and height above ground (dtm), candidates by class, returns and a height "
-            "window, an eigenvalue planar/rugged pre-classification, the top-hat point filter, tiled 2D Hough with "
+            "window, an eigenvalue planar/rugged pre-classification (a flat set that falls into narrow bands across it, or within one band in plan into bands in height, is wires side by side or one above another, not a roof), the top-hat point filter, tiled 2D Hough with "
             "validation, SVD refit, merging across tiles; then the 3D step: the points near each 2D "
             "line split by height and continuity into wires (stacked conductors come apart) and a catenary fitted "
             "per span (where one does not fit, catenaries peeled one at a time: wires stacked under 1 m apart; "
