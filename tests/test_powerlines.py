@@ -336,16 +336,14 @@ def test_peel_separates_stacked_wires_and_leaves_crowns():
     assert peel_catenaries(crown[:, 0], crown[:, 1], crown[:, 2], 20, 8.0, 0.2, 5.0) == []
 
 
-@pytest.mark.xfail(strict=True, reason="#16 open: the 3D step links the stack into one piece (z_link 1 m); "
-                   "split_spans cuts it where the mixture's slope wanders and peeling it whole fits a "
-                   "catenary across cables at the pole's kink; one cable's spans chain to another's")
+@pytest.mark.xfail(strict=True, reason="#16 open: the 3D step links the stack into one piece (z_link 1 m) "
+                   "and split_spans cuts it where the mixture's slope wanders; local layers (windows of "
+                   "4 m, see the issue note) pass it but cost part3_an recall, so they are not in yet")
 def test_a_stack_of_cables_over_two_spans_is_one_wire_per_cable_per_span():
     """Three cables 0.3 m apart one above another (a joint-use pole's), two 40 m spans on a 10 %
     climb with the pole between, each cable missing its points over a different stretch (their
     mixture's slope wanders there): the 3D step gives each cable its own catenary per span and
     nearly all its points, with no points of another cable."""
-    _stacked = lambda s, z: True  # noqa
-
     rng = np.random.default_rng(7)
     xs, zs, label = [], [], []
     for k in range(3):
@@ -356,7 +354,6 @@ def test_a_stack_of_cables_over_two_spans_is_one_wire_per_cable_per_span():
                                                catenary(s, 0, 60, 400) - catenary(40, 0, 60, 400))
         xs.append(s), zs.append(z + rng.normal(0, 0.03, len(s))), label.append(np.full(len(s), k))
     s, z, label = np.concatenate(xs), np.concatenate(zs), np.concatenate(label)
-    pass
     py = rng.normal(0, 0.04, len(s))
     lines = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 80.0)]
     spans, line_of, wire_of = conductors_3d(lines, s, py, z, band=0.4, z_link=1.0, s_link=5.0, min_span=8.0,
@@ -1018,6 +1015,49 @@ def test_a_wire_past_its_last_support_is_its_next_span(seed):
                       min_span_m=8.0) == []
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_hole_between_two_spans_of_a_wire_is_searched_from_its_ends(seed):
+    """The 3D step fitted a wire's span from 0 to 40 m and another from 80 to 120 m; between them
+    (past the support at 40 m) it missed the wire, seen sparsely over a crown. Searched from the
+    hole's end as from a wire's last span: the span in it is found with its points, and the
+    search stops where the wire's next fitted span begins. Where the 3D step fitted a piece in
+    the hole and found no catenary there (its rms over max_rms), the hole is left alone."""
+    from toolbox_plugins.powerlines.core import Span, next_spans
+
+    rng = np.random.default_rng(seed)
+    sp, line, x, y, z, free, is_next = _next_span_scene(rng)
+    far = Span(0, 0, 2, 100.0, 300.0, 9.0, 80.0, 120.0, 0.03, 160, 0.67)
+    found = next_spans([sp, far], [line], x, y, z, free, 0.2, max_gap_m=5.0, reach_m=64.0, min_span_m=8.0)
+    assert len(found) == 1
+    li, wire, k, s, off, fit = found[0]
+    assert (li, wire) == (0, 0) and s.max() < 80.0
+    assert np.mean(is_next[k]) >= 0.97 and is_next[k].sum() >= 0.95 * is_next.sum()
+    failed = Span(0, 0, 1, 56.0, 300.0, 9.0, 50.0, 65.0, 0.9, 60, 0.3)
+    assert next_spans([sp, failed, far], [line], x, y, z, free, 0.2, max_gap_m=5.0, reach_m=64.0,
+                      min_span_m=8.0) == []
+
+
+def test_no_next_span_through_a_pole_and_a_crown_at_its_support():
+    """Past a mobile scan's wire (rms 3 cm), a pole's and a crown's points around the support
+    (a 1.5 m blob, half a metre of heights) with a few of the wire's own points either side: a
+    catenary through them fits loosely, and most of its points lie within a quarter of S_min: no
+    next span. (Oakland part3_an: a span of 52 points, 31 of them pole and crown.)"""
+    from toolbox_plugins.powerlines.core import Span, next_spans
+
+    rng = np.random.default_rng(4)
+    c = 300.0
+    sp = Span(0, 0, 0, 20.0, c, 9.5, 0.0, 40.0, 0.03, 160, 0.67)
+    z_end = float(catenary(40.0, 9.5, 20.0, c))
+    blob = np.column_stack([rng.uniform(41.0, 42.5, 45), rng.normal(0, 0.05, 45), z_end + rng.uniform(-0.25, 0.25, 45)])
+    few = np.column_stack([np.r_[rng.uniform(44.0, 49.0, 8), rng.uniform(36.5, 39.0, 0)], rng.normal(0, 0.03, 8),
+                           z_end - 0.05 * np.arange(8) + rng.normal(0, 0.03, 8)])
+    pts = np.r_[blob, few]
+    line = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 40.0)
+    free = np.ones(len(pts), bool)
+    assert next_spans([sp], [line], pts[:, 0], pts[:, 1], pts[:, 2], free, 0.2, max_gap_m=5.0, reach_m=64.0,
+                      min_span_m=8.0) == []
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_sparse_wire_is_searched_on_from_where_its_grown_points_end(seed):
     """An earth wire a street scanner sees at about a point per metre: its fitted span ends at
@@ -1559,9 +1599,10 @@ def test_wire_point_spacing_is_the_median_gap_along_fitted_spans():
 def test_a_sparse_survey_gets_a_gap_scaled_to_its_wire_spacing(tmp_path):
     """A distribution corridor at 5 pts/m2 (wire points 0.4 m apart along the wire, twice the
     method's data's spacing per its V_max): at the method's V_max = 2.5 m a gap cuts a run every
-    few spans (recall 0.885 measured); the automatic V_max, 10 median spacings (4.07 m), finds
-    every conductor, none false, crossings within 5 cm and the wire points (0.996 / 0.989
-    measured). An explicit V_max is used as given."""
+    few spans (recall 0.906 measured without the searches that recover cut runs); the automatic
+    V_max, 10 median spacings (4.07 m), finds every conductor, none false, crossings within 5 cm
+    and the wire points (0.996 / 0.993 measured; 0.992 / 0.986 at V_max 2.5 m with the searches).
+    An explicit V_max is used as given."""
     path = tmp_path / "sparse.laz"
     toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", density_ppm2=5.0,
                 seed=1)
@@ -1583,10 +1624,11 @@ def test_a_sparse_survey_gets_a_gap_scaled_to_its_wire_spacing(tmp_path):
     cr = gpd.read_file(tmp_path / "auto.gpkg", layer="crossings")
     assert max(crossing_errors(np.column_stack([cr.geometry.x, cr.geometry.y]), truth)) <= 0.05
     assert precision >= 0.99 and recall >= 0.97, (precision, recall)
-    st_m, _, recall_m = run("method", v_max_m=2.5, sibling_wires=False)
-    assert st_m["v_max_m_used"] == 2.5 and recall_m < recall - 0.05
-    # the search beside fitted spans finds most of the cut runs again (0.967 measured), not all
-    assert run("method_siblings", v_max_m=2.5)[2] < recall
+    st_m, _, recall_m = run("method", v_max_m=2.5, sibling_wires=False, next_spans=False)
+    assert st_m["v_max_m_used"] == 2.5 and recall_m < recall - 0.05, (recall_m, recall)
+    # the searches beside fitted spans and on from their ends (into the holes the cuts left) find
+    # most of the cut runs again, not all
+    assert run("method_siblings", v_max_m=2.5)[2] < recall, recall
 
 
 def test_corridor_variants_have_their_geometry():

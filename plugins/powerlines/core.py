@@ -263,6 +263,8 @@ WIRE_LATERAL_FLOOR_M = 0.05
 # the least distance across the line at which the 3D step tells side-by-side wires apart (a
 # triangle bundle's 0.2 m stays one piece, a ribbon's 0.3 m does not)
 SIDE_BY_SIDE_MIN_GAP_M = 0.25
+# a wire's height scatter about its catenary (ALS and mobile scans: 0.02-0.05 m)
+WIRE_HEIGHT_RMS_M = 0.08
 
 
 @dataclass
@@ -1225,19 +1227,28 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
         for wire in sorted({sp.wire for sp in line_spans}):
             mine = [sp for sp in line_spans if sp.wire == wire]
             ours = (line_of == li) & (wire_of == wire) if line_of is not None else None
-            for sign in (1.0, -1.0):
-                sp = max(mine, key=lambda q: sign * (q.s_to if sign > 0 else q.s_from))
+            failed = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms > max_rms]
+            for sp, sign, hole in _span_ends(mine, max_gap_m):
                 end = sp.s_to if sign > 0 else sp.s_from
+                if np.isfinite(hole) and any(min(q.s_to, max(end, end + sign * hole)) >
+                                             max(q.s_from, min(end, end + sign * hole)) for q in failed):
+                    continue  # the 3D step fitted its points there and found no wire's catenary
                 if ours is not None:
-                    past = ours & (sign * (s - end) > 0) & \
+                    past = ours & (sign * (s - end) > 0) & (sign * (s - end) < hole) & \
                         (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
                     if past.any():
+                        hole -= abs(float(s[past].max() if sign > 0 else s[past].min()) - end)
                         end = float(s[past].max() if sign > 0 else s[past].min())
                 z_end = float(catenary(end, sp.z0, sp.s0, sp.c))
                 o0, o1 = sp.offset, sp.offset_slope
+                hole_end = end + sign * hole  # where the wire's next fitted span begins (inf: none)
+                # as thin in height as the wire it continues: a pole's or a crown's points lined up
+                # with the wire's few past the support fit a catenary, loosely
+                thin_m = max(2 * sp.rms, WIRE_HEIGHT_RMS_M)
                 for _ in range(max_rounds):
+                    stop = end + sign * min(reach_m, sign * (hole_end - end))
                     out = sign * (s - end)
-                    zone = np.flatnonzero((out > 0) & (out <= reach_m) & ~taken &
+                    zone = np.flatnonzero((out > 0) & (sign * (stop - s) > 0) & ~taken &
                                           (np.abs(off - o0 - o1 * s) <= lateral_m) & (np.abs(pz - z_end) <= max_rise_m))
                     if len(zone) < min_points:
                         break
@@ -1248,6 +1259,8 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                         near = float(np.min(sign * (s[k] - end)))
                         step = abs(float(catenary(end, *fit[:3])) - z_end)
                         if near > max_gap_m or step > max_step_m:
+                            continue
+                        if fit[3] > thin_m or _clumped(s[k], min_span_m / 4):
                             continue
                         # thin across: a wire's points hug their trend, clutter (a cross arm, a
                         # crown's edge) spreads over the band searched (median lateral_m / 2)
@@ -1267,19 +1280,46 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                         # the span's points along its own trend and catenary (past a support a wire
                         # turns a little, and the end's trend continued loses it across a long span)
                         o1, o0 = line_fit(s[k], off[k])
-                        more = np.flatnonzero((sign * (s - end) > 0) & (sign * (s - end) <= reach_m) & ~taken &
+                        more = np.flatnonzero((sign * (s - end) > 0) & (sign * (stop - s) > 0) & ~taken &
                                               (np.abs(off - o0 - o1 * s) <= lateral_m) &
                                               (np.abs(pz - catenary(s, *fit[:3])) <= max(3 * fit[3], 0.15)))
                         run = _longest_run(s, more, max_gap_m)
                         if len(run) <= len(k) or not np.isin(k, run).all():
                             break
-                        k, fit = run, fit_catenary(s[run], pz[run])
+                        refit = fit_catenary(s[run], pz[run])
+                        if refit[3] > thin_m:
+                            break
+                        k, fit = run, refit
                     o1, o0 = line_fit(s[k], off[k])  # the next search follows this span's own trend
                     found.append((li, wire, k, s[k], off[k], fit))
                     taken[k] = True
                     end = float(s[k].max() if sign > 0 else s[k].min())
                     z_end = float(catenary(end, *fit[:3]))
     return found
+
+
+def _clumped(s, window_m: float, share: float = 0.5) -> bool:
+    """More than ``share`` of the positions ``s`` within one window of ``window_m``: a pole's or a
+    crown's blob with a few points either side, not a wire's points spread along it."""
+    ss = np.sort(s)
+    return bool((np.searchsorted(ss, ss + window_m, side="right") - np.arange(len(ss))).max() > share * len(ss))
+
+
+def _span_ends(spans, min_hole_m: float):
+    """The ends of one wire's spans that open onto no more of it: (span, direction along the line,
+    length of the hole up to its next span that way, inf past the last). Both ends of the whole
+    wire, and the ends of holes longer than ``min_hole_m`` inside it (the wire's points were too
+    few there for the 3D step, as past its last span)."""
+    out = []
+    for sign in (1.0, -1.0):
+        for sp in spans:
+            end = sp.s_to if sign > 0 else sp.s_from
+            ahead = [sign * ((q.s_from if sign > 0 else q.s_to) - end) for q in spans
+                     if q is not sp and sign * ((q.s_to if sign > 0 else q.s_from) - end) > 0]
+            hole = min(ahead) if ahead else np.inf
+            if hole > min_hole_m:
+                out.append((sp, sign, hole))
+    return out
 
 
 def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_gap_m: float = 1.0,
@@ -1634,20 +1674,27 @@ def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float, slop
             a = parent[a]
         return a
 
-    taken_next = set()
+    # every admissible link costed by its height mismatch and its gap (a metre of gap weighs as
+    # 2 cm of height), the cheapest taken first, each piece followed and preceded at most once:
+    # of wires stacked 0.3 m apart, the next piece at the same height wins over a nearer one
+    # a layer away
+    links = []
     for i, (lo_i, hi_i, _, zhi_i, ki, _, _, shi_i) in enumerate(info):
-        best = None
         for lo_j, hi_j, zlo_j, _, kj, _, slo_j, _ in info[i + 1:]:
             gap = lo_j - hi_i
-            if gap < -1.0 or gap > gap_max or kj in taken_next:
+            if gap < -1.0 or gap > gap_max:
                 continue
             half = max(gap, 0.0) / 2
             dz = abs((zhi_i + shi_i * half) - (zlo_j - slo_j * half))
-            if dz <= z_tol + 0.02 * max(gap, 0.0) and (best is None or gap < best[0]):
-                best = (gap, kj)
-        if best is not None:
-            taken_next.add(best[1])
-            parent[root(best[1])] = root(ki)
+            if dz <= z_tol + 0.02 * max(gap, 0.0):
+                links.append((dz + 0.02 * max(gap, 0.0), ki, kj))
+    has_next, has_prev = set(), set()
+    for _, ki, kj in sorted(links):
+        if ki in has_next or kj in has_prev:
+            continue
+        has_next.add(ki)
+        has_prev.add(kj)
+        parent[root(kj)] = root(ki)
     wire_of = np.full(n, -1)
     roots = sorted({root(i[4]) for i in info},
                    key=lambda r: -np.median([i[5] for i in info if root(i[4]) == r]))
