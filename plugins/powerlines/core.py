@@ -263,7 +263,8 @@ WIRE_LATERAL_FLOOR_M = 0.05
 # the least distance across the line at which the 3D step tells side-by-side wires apart (a
 # triangle bundle's 0.2 m stays one piece, a ribbon's 0.3 m does not)
 SIDE_BY_SIDE_MIN_GAP_M = 0.25
-# a wire's height scatter about its catenary (ALS and mobile scans: 0.02-0.05 m)
+# the least rms about its catenary that a wire's span may have, whatever the fit of the span it
+# continues (ALS and mobile scans fit 0.02-0.05 m)
 WIRE_HEIGHT_RMS_M = 0.08
 
 
@@ -1207,11 +1208,16 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
     sparsely among crowns (a mobile scan's wire past the last pole it passes) the shape test and
     the Hough have too few of its points.
 
-    From each end of each wire's outermost span that fits (rms <= ``max_rms``), the points ``p*``
+    From each end of a wire's spans that fit (rms <= ``max_rms``) where no more of the wire follows
+    within ``max_gap_m`` (``_span_ends``: past its outermost spans, and into the holes inside it,
+    up to where its next fitted span begins; not into a hole where one of its spans was fitted and
+    did not fit), the points ``p*``
     (off the ground, metres; ``free``: on no wire yet) within ``lateral_m`` of its plan trend
     continued, up to ``reach_m`` on and ``max_rise_m`` up or down from its end height, are
     searched for catenaries (``peel_catenaries``: thin, gentle, ``min_span_m`` long, no gap over
-    ``max_gap_m``). One is that wire's next span when it starts within ``max_gap_m`` of the end,
+    ``max_gap_m``). One is that wire's next span when it fits as closely as the span it continues
+    (rms at most twice that span's, or ``WIRE_HEIGHT_RMS_M``), its points are not bunched (at most
+    half within ``min_span_m`` / 4: a pole's and a crown's blob), it starts within ``max_gap_m`` of the end,
     meets the end within ``max_step_m`` in height (they hang on the same support), is thin across
     (its points' median distance from their plan trend at most ``lateral_m`` / 4), and is a
     concentration of points (within 0.1 m of it ``min_contrast`` times denser than 0.2-0.5 m
@@ -1230,18 +1236,17 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
             failed = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms > max_rms]
             for sp, sign, hole in _span_ends(mine, max_gap_m):
                 end = sp.s_to if sign > 0 else sp.s_from
-                if np.isfinite(hole) and any(min(q.s_to, max(end, end + sign * hole)) >
-                                             max(q.s_from, min(end, end + sign * hole)) for q in failed):
+                hole_end = end + sign * hole  # where the wire's next fitted span begins (inf: none)
+                lo, hi = min(end, hole_end), max(end, hole_end)
+                if np.isfinite(hole) and any(min(q.s_to, hi) > max(q.s_from, lo) for q in failed):
                     continue  # the 3D step fitted its points there and found no wire's catenary
                 if ours is not None:
-                    past = ours & (sign * (s - end) > 0) & (sign * (s - end) < hole) & \
+                    past = ours & (s > lo) & (s < hi) & \
                         (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
                     if past.any():
-                        hole -= abs(float(s[past].max() if sign > 0 else s[past].min()) - end)
                         end = float(s[past].max() if sign > 0 else s[past].min())
                 z_end = float(catenary(end, sp.z0, sp.s0, sp.c))
                 o0, o1 = sp.offset, sp.offset_slope
-                hole_end = end + sign * hole  # where the wire's next fitted span begins (inf: none)
                 # as thin in height as the wire it continues: a pole's or a crown's points lined up
                 # with the wire's few past the support fit a catenary, loosely
                 thin_m = max(2 * sp.rms, WIRE_HEIGHT_RMS_M)

@@ -1269,9 +1269,10 @@ def toolbox_algorithms():
             Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
                       "points on it (within 0.25 m in plan and the fit's tolerance, no gap over 2 x v_max_m, up to "
                       "2 x s_min_m): a wire under the height window or next to a tower"),
-            Parameter("next_spans", bool, True, "past each wire's outermost span, search its plan trend for the "
-                      "next span (a catenary meeting it at its support, S_min long or more, a concentration of "
-                      "points, not a crown's edge): a wire seen sparsely past the last support the Hough found"),
+            Parameter("next_spans", bool, True, "past each wire's outermost span, and into the holes between its "
+                      "spans, search its plan trend for the next span (a catenary meeting it at its support, S_min "
+                      "long or more, as thin as the span it continues, a concentration of points, not a crown's "
+                      "edge or a pole's blob): a wire seen sparsely past the last support the Hough found"),
             Parameter("bridge_gaps", bool, True, "between two pieces of a wire up to 2 x s_min_m apart that one "
                       "catenary fits as closely as their own points, take the points on it: a wire through a crown"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
