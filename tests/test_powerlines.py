@@ -609,6 +609,23 @@ def test_straight_wires_finds_short_wires_fanning_from_a_pole_among_a_crown():
         assert (label[r] == k).sum() >= 36 and (label[r] == -1).sum() <= 2
 
 
+def test_straight_wires_go_on_past_a_pole_to_the_wires_it_holds():
+    """A pole (a steep run of 150 points) linked to the two wires at its top: its run is the most
+    populous and comes first, but being too steep it only leaves the set, and the wires it holds
+    are each found; the pole is not a run."""
+    from toolbox_plugins.powerlines.core import straight_wires
+
+    rng = np.random.default_rng(8)
+    pole = _segment(rng, (0, 0, 0.5), (0, 0, 9.0), 150, noise=0.02)
+    wires = [_segment(rng, (0.1, 0, 8.8), (0.6, -5.5, 8.9), 40), _segment(rng, (0.1, 0, 8.3), (-5.0, 1.5, 8.2), 40)]
+    xyz = np.vstack([pole] + wires)
+    label = np.repeat([-1, 0, 1], [150, 40, 40])
+    runs = straight_wires(xyz, 4.0, 2.5)
+    assert sorted(np.bincount(label[r] + 1, minlength=3).argmax() - 1 for r in runs) == [0, 1]
+    for r in runs:
+        assert (label[r] == -1).sum() <= 2 and len(r) >= 36
+
+
 def test_straight_wires_do_not_depend_on_point_order_or_origin():
     """A survey tile holds the same points in another order and shifted by its origin: the same
     runs come out (each linked set is searched in the order of its coordinates, with its own
@@ -1352,6 +1369,37 @@ def test_catenary_fit_of_a_short_nearly_straight_piece_prints_no_warning():
         warnings.simplefilter("error")
         z0, s0, c, rms = fit_catenary(s, z)
     assert np.isfinite([z0, s0, c]).all() and rms < 0.05
+
+
+@pytest.mark.parametrize("seed", [0, 42, 82, 96, 105])  # the last four diverged from the lowest point
+def test_catenary_fit_of_a_straight_piece_on_a_steep_slope(seed):
+    """Ten metres of a taut cable dropping 23 % (a joint-use cable between poles on a hillside),
+    20 points with a 3.7 m gap, the fit started from a straight wire with its vertex at the lowest
+    point: the solver ran off to c = 0.4 m (rms inf) on some draws, because the robust weight of a
+    residual over 1e154 m underflowed to 0 and such points cost nothing; the cable's points went
+    unclaimed."""
+    rng = np.random.default_rng(seed)
+    s = np.sort(np.r_[rng.uniform(0.8, 2.5, 7), rng.uniform(6.1, 9.8, 13)])
+    truth = catenary(s, 288.4, 191.0, 714.0)  # the curve the comm2_05 scene's cable lies on there
+    z = truth + rng.normal(0, 0.03, len(s))
+    z0, s0, c, rms = fit_catenary(s, z)
+    assert rms < 0.05
+    assert np.abs(catenary(s, z0, s0, c) - truth).max() < 0.06
+
+
+def test_catenary_fit_of_a_straight_piece_is_no_worse_than_its_line():
+    """23 points of a wire at an AHN4 tower (12AN2_20) that bend the wrong way: a catenary tends
+    to the straight line as c grows, so its fit must be as good as the line's. Started on the
+    points' slope instead of at the lowest point, the solver stalls on the flat valley towards
+    c = infinity (rms 0.122 m against the line's 0.111 m), and the piece fails the span's rms
+    test."""
+    s = np.array([0.0, 0.37, 0.71, 0.3, 3.56, 7.09, 7.44, 7.78, 8.11, 8.44, 7.47, 7.8, 8.14, 8.52, 2.58, 3.21, 3.8,
+                  7.42, 8.71, 8.41, 7.83, 8.48, 1.56])
+    z = np.array([31.39, 31.46, 31.39, 31.41, 31.8, 31.79, 31.72, 31.68, 31.63, 31.48, 31.65, 31.64, 31.64, 31.55,
+                  31.62, 31.71, 31.76, 31.67, 31.48, 31.57, 31.64, 31.55, 31.52])
+    line = np.polyval(np.polyfit(s, z, 1), s) - z
+    z0, s0, c, rms = fit_catenary(s, z)
+    assert rms <= np.sqrt(np.mean(line ** 2)) + 0.005
 
 
 def test_every_conductor_found_no_false_one(corridor_result):

@@ -354,9 +354,7 @@ def fit_catenary(s, z):
                 ch = np.cosh(u)
                 r = p[0] + c * (ch - 1.0) - z  # = catenary(s, p0, p1, c) - z, operation for operation
                 q = r / 0.1
-                q *= q
-                q += 1.0
-                np.sqrt(q, out=q)
+                np.hypot(q, 1.0, out=q)  # sqrt(1 + q²) without overflow: a far point must not weigh 0
                 w = np.sqrt(2.0 / (q + 1.0))
             last.clear()
             last.update(key=key, c=c, u=u, ch=ch, r=r, q=q, w=w)
@@ -870,7 +868,8 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     points with the most points within ``tol_m``, its longest run without a gap of
     ``max_gap_m``, refitted (principal axis) and its points taken again; kept when the run is at
     least ``min_length_m`` long, holds ``min_points`` and rises at most ``max_slope``. Its points
-    leave the set and the rest is searched again (strongest first within each set)."""
+    leave the set, kept or too steep (a pole), and the rest is searched again (strongest first
+    within each set) until the best run is too short or too sparse."""
     from scipy.sparse.csgraph import connected_components as components
 
     n = len(xyz)
@@ -890,13 +889,13 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
         rng = np.random.default_rng([seed, len(left)])
         while len(left) >= min_points and np.linalg.norm(np.ptp(xyz[left], axis=0)) >= min_length_m:
             run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng)
-            if run is None:
+            if run is None or len(run) < min_points:
                 break
             q = xyz[left[run]]
             d = q[-1] - q[0]
-            if len(run) < min_points or abs(d[2]) > max_slope * np.hypot(d[0], d[1]):
-                break
-            out.append(left[run])
+            if abs(d[2]) <= max_slope * np.hypot(d[0], d[1]):
+                out.append(left[run])
+            # a steep run (a pole, a trunk) leaves the set too: wires held on it come next
             left = np.delete(left, run)
     return out
 
