@@ -626,6 +626,24 @@ def test_straight_wires_go_on_past_a_pole_to_the_wires_it_holds():
         assert (label[r] == -1).sum() <= 2 and len(r) >= 36
 
 
+def test_straight_wires_draw_a_wire_beside_a_denser_short_bar():
+    """A cross arm (1.6 m, 120 points) at a pole top linked to a 5.5 m wire of 30 points: the line
+    best supported near its drawn pair is the arm's, whose run is too short to be a wire; the
+    next best lines not along it are tried, and the wire is still found (the arm is no run)."""
+    from toolbox_plugins.powerlines.core import straight_wires
+
+    found = 0
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        arm = _segment(rng, (-0.8, 0, 8.0), (0.8, 0, 8.0), 120, noise=0.02)
+        wire = _segment(rng, (0.8, 0.1, 8.0), (1.5, 5.6, 8.1), 30)
+        xyz = np.vstack([arm, wire])
+        runs = straight_wires(xyz, 4.0, 2.5)
+        assert all((r < 120).sum() <= 20 for r in runs)  # no run is the arm's (it meets the wire's end)
+        found += sum((r >= 120).sum() >= 24 for r in runs)  # four fifths of the wire
+    assert found == 5
+
+
 def test_straight_wires_do_not_depend_on_point_order_or_origin():
     """A survey tile holds the same points in another order and shifted by its origin: the same
     runs come out (each linked set is searched in the order of its coordinates, with its own

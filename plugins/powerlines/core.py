@@ -266,6 +266,9 @@ SIDE_BY_SIDE_MIN_GAP_M = 0.25
 # the least rms about its catenary that a wire's span may have, whatever the fit of the span it
 # continues (ALS and mobile scans fit 0.02-0.05 m)
 WIRE_HEIGHT_RMS_M = 0.08
+# how many of a set's best-supported lines (through distinct points) straight_wires tries before
+# it leaves the set: a cross arm or a pole top's several angles come before a wire beside them
+N_BEST_LINES = 5
 
 
 @dataclass
@@ -865,7 +868,8 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     straight line is its model.
 
     Per connected set (points ``link_m`` apart), sequential RANSAC: the line through two sampled
-    points with the most points within ``tol_m``, its longest run without a gap of
+    points with the most points within ``tol_m`` (where its run is too short, the next best
+    through other points, up to ``N_BEST_LINES``), its longest run without a gap of
     ``max_gap_m``, refitted (principal axis) and its points taken again; kept when the run is at
     least ``min_length_m`` long, holds ``min_points`` and rises at most ``max_slope``. Its points
     leave the set, kept or too steep (a pole), and the rest is searched again (strongest first
@@ -1043,18 +1047,36 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     rel = p[flat] - p[i][sid]
     t = np.einsum("ij,ij->i", rel, d[sid])
     counts = np.bincount(sid, weights=(np.einsum("ij,ij->i", rel, rel) - t * t) <= tol_m * tol_m, minlength=len(i))
-    m = int(np.argmax(counts))
-    a, u = p[i[m]], d[m]
-    for _ in range(2):  # the run along the best line, refitted to its points
+    # the best-supported lines in turn: the best may be a short dense bit (a cross arm, a pole
+    # top) whose run is too short, and the wires beside it must still be drawn; a line drawn from
+    # a point of a run that failed is not tried (lines through the arm at other angles)
+    spent, tried = np.zeros(n, bool), 0
+    for m in np.argsort(-counts, kind="stable"):
+        if spent[i[m]]:
+            continue
+        run, length = _refined_run(p, p[i[m]], d[m], max_gap_m, tol_m)
+        if length >= min_length_m:
+            return run
+        spent[run] = spent[i[m]] = True
+        tried += 1
+        if tried == N_BEST_LINES:
+            break
+    return None
+
+
+def _refined_run(p, a, u, max_gap_m, tol_m):
+    """(indices of the run along the line through ``a`` along ``u``, refitted twice to its points
+    and sorted along it; its length in metres)."""
+    for _ in range(2):
         t, run = _run_along(p, a, u, tol_m, max_gap_m)
         if len(run) < 3:
-            return None
+            return run, 0.0
         a = p[run].mean(axis=0)
         u = np.linalg.svd(p[run] - a, full_matrices=False)[2][0]
     t, run = _run_along(p, a, u, tol_m, max_gap_m)
-    if len(run) < 2 or t[run].max() - t[run].min() < min_length_m:
-        return None
-    return run[np.argsort(t[run])]
+    if len(run) < 2:
+        return run, 0.0
+    return run[np.argsort(t[run])], float(t[run].max() - t[run].min())
 
 
 def _run_along(p, a, u, tol_m, max_gap_m):
