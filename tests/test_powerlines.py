@@ -696,7 +696,7 @@ def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_fac
     steep = np.flatnonzero(np.isin(label, ["pole", "body"]))
     free = np.flatnonzero(np.isin(label, ["across", "arm", "crossarm", "facade_row"]))
     params = {"s_min_m": 8.0, "v_max_m": 2.5}
-    found = _short_wires(pc, free, np.arange(len(pc)), steep, wired, params, 1.0, 1.0)
+    found = _short_wires(pc, free, np.arange(len(pc)), steep, wired, params, 1.0, 1.0, wire_like=label != "facade")
     assert found is not None
     lines, geo, spans, line_of, wire_of, _ = found
     assert len(geo) == 1 and len(lines["conductors"]) == 1 and len(spans) == 1
@@ -705,6 +705,91 @@ def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_fac
     across = np.column_stack([pc.x, pc.y])[label == "across"]
     extent = np.ptp((across - across[0]) @ geo[0][1])
     assert spans[0].rms <= 0.05 and spans[0].s_to - spans[0].s_from >= extent - 0.3
+
+
+def test_short_wires_take_the_wires_stacked_with_one_and_not_a_facade_row_beside_it():
+    """Three wires leave a pole top one over another, 0.3 m apart (a mobile scan's view of
+    cables across its street): the top one is seen over 6 m, the two under it over 3.5 m only
+    (shorter than the search's S_min / 2), and half of the lowest one's points are on no run
+    the search draws (the shape test took them for the pole's). The top wire stands alone
+    though the others are 0.3 m under it (wires of a stack, not clutter), and both wires under
+    it are found beside it; a scan row of a facade 1.2 m beside it, as long and as parallel, is
+    not taken (the facade's next rows are around it), nor is a roof's eave leaving the pole on
+    the other side, though its roof's next rows rising from it are as sparse as wires."""
+    from toolbox.io.points import PointCloud
+    from toolbox_plugins.powerlines.plugin import _short_wires
+
+    rng = np.random.default_rng(3)
+    a, b = np.array([20.2, -0.4]), np.array([20.8, -6.5])
+    d = (b - a) / np.linalg.norm(b - a)
+    side = np.array([-d[1], d[0]])
+
+    def along(z0, z1, length, n, shift=0.0):
+        p, q = a + shift * side, a + shift * side + length * d
+        return _segment(rng, (*p, z0), (*q, z1), n)
+
+    def eave(k):  # its k-th row up the roof
+        e = np.array([3.0, 5.3]) / np.hypot(3.0, 5.3)
+        p = np.array([20.5, 0.2]) + k * 0.3 * np.array([-e[1], e[0]])
+        return _segment(rng, (*p, 8.3 + 0.17 * k), (*(p + 6.1 * e), 8.2 + 0.17 * k), 40)
+
+    main = np.vstack([_segment(rng, (0, y, 8.0), (100, y, 8.0), 400) for y in (-1.0, 0.0, 1.0)])
+    parts = {"main": main, "pole": _segment(rng, (20, -0.3, 0.5), (20, -0.3, 8.5), 80, noise=0.03),
+             "top": along(8.3, 8.2, 6.1, 40), "middle": along(8.0, 7.95, 3.5, 24),
+             "low_searched": along(7.7, 7.65, 3.5, 12), "low_loose": along(7.7, 7.65, 3.5, 12),
+             "facade_row": along(8.3, 8.2, 6.1, 40, shift=1.2),
+             "facade": np.vstack([along(8.3 + k * 0.35, 8.2 + k * 0.35, 6.1, 40, shift=1.2) for k in (-2, -1, 1, 2)]),
+             # an eave leaving the pole top on the other side, its roof rising 30 degrees from it
+             "eave": eave(0), "roof": np.vstack([eave(k) for k in (1, 2, 3)])}
+    xyz = np.vstack(list(parts.values()))
+    label = np.concatenate([[k] * len(v) for k, v in parts.items()])
+    pc = PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2])
+    searched = np.flatnonzero(np.isin(label, ["top", "middle", "low_searched", "facade_row", "eave"]))
+    free = np.r_[searched, np.flatnonzero(label == "low_loose")]
+    found = _short_wires(pc, free, np.arange(len(pc)), np.flatnonzero(label == "pole"), np.flatnonzero(label == "main"),
+                         {"s_min_m": 8.0, "v_max_m": 2.5}, 1.0, 1.0, n_searched=len(searched),
+                         wire_like=label != "facade")
+    assert found is not None
+    lines, geo, spans, line_of, wire_of, _ = found
+    got = label[free[line_of >= 0]]
+    assert (got == "top").sum() >= 38 and (got == "middle").sum() >= 22
+    assert (got == "low_searched").sum() + (got == "low_loose").sum() >= 22 and (got == "low_loose").sum() >= 10
+    assert (got == "facade_row").sum() == 0 and (got == "facade").sum() == 0
+    assert (got == "eave").sum() == 0 and (got == "roof").sum() == 0
+    # one conductor per wire, each of one wire's points only
+    assert len(geo) == 3
+    for li in range(3):
+        assert len(set(label[free[line_of == li]]) - {"low_searched", "low_loose"}) <= 1
+
+
+def test_short_wires_seen_over_less_than_the_minimum_length_as_a_stack():
+    """Cables from a pole top to a house, one over another 0.8 m apart, seen over 3 m only (less
+    than the search's S_min / 2 = 4 m): together they are wires, each one found; a single
+    3 m run leaving another pole alone is not (one run that short is any edge)."""
+    from toolbox.io.points import PointCloud
+    from toolbox_plugins.powerlines.plugin import _short_wires
+
+    rng = np.random.default_rng(5)
+    main = np.vstack([_segment(rng, (0, y, 8.0), (100, y, 8.0), 400) for y in (-1.0, 0.0, 1.0)])
+    parts = {"main": main, "pole": _segment(rng, (20, -0.3, 0.5), (20, -0.3, 8.5), 80, noise=0.03),
+             "pole2": _segment(rng, (70, -0.3, 0.5), (70, -0.3, 8.5), 80, noise=0.03)}
+    for k in range(3):  # leaving the pole across the line, 0.8 m apart in height
+        parts[f"cable{k}"] = _segment(rng, (20.3, -1.2, 7.9 - 0.8 * k), (20.6, -4.2, 7.8 - 0.8 * k), 20)
+    parts["alone"] = _segment(rng, (70.3, -1.2, 7.9), (70.6, -4.2, 7.8), 20)
+    xyz = np.vstack(list(parts.values()))
+    label = np.concatenate([[k] * len(v) for k, v in parts.items()])
+    pc = PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2])
+    free = np.flatnonzero(np.char.startswith(label.astype(str), "cable") | (label == "alone"))
+    found = _short_wires(pc, free, np.arange(len(pc)), np.flatnonzero(np.isin(label, ["pole", "pole2"])),
+                         np.flatnonzero(label == "main"), {"s_min_m": 8.0, "v_max_m": 2.5}, 1.0, 1.0,
+                         wire_like=np.ones(len(pc), bool))
+    assert found is not None
+    lines, geo, spans, line_of, wire_of, _ = found
+    assert len(geo) == 3
+    for k in range(3):
+        got = set(line_of[label[free] == f"cable{k}"])
+        assert len(got) == 1 and -1 not in got and (label[free[line_of == got.pop()]] == f"cable{k}").all()
+    assert (line_of[label[free] == "alone"] == -1).all()
 
 
 def test_arms_of_a_tower_with_or_without_its_line_found():
@@ -2008,13 +2093,14 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.94, 0.77), ("part3_ak", 0.97, 0.9),
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.94, 0.83), ("part3_ak", 0.97, 0.9),
                                                               ("part2_ai", 0.89, 0.84)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors just under what is reached, not the
-    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.945 /
-    R 0.776 (tangles and risers at pole tops and 2-4 m pieces across the street are missed);
+    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.943 /
+    R 0.839 (0.945 / 0.776 before stacks of short wires: a stack's wires counted as clutter
+    around each other; tangles and risers at pole tops are missed);
     part3_ak, wires seen for 5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top
     edge was taken for a wire); part2_ai: 0.899 / 0.841 (0.806 / 0.804 before the next span past
     the last pole and crowded spans: its sparse upper wire past that pole was missed, and a

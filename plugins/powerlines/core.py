@@ -907,44 +907,148 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
 
 def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wired: np.ndarray, min_length_m: float,
                 max_gap_m: float, max_around: float = 0.5, reach_m: float = 5.0,
-                structure_m: float = 1.5) -> list[np.ndarray]:
-    """The ``straight_wires`` runs of ``xyz`` (wire-like points on no wire) that are wires seen
-    over a few metres, given the points off the ground, those of structures (``steep``: poles,
-    tower bodies) and those of the wires found (``wired``), all (n, 3) in one frame. A run is kept
-    when
-    * it stands alone in its cross-section: among ``off_ground``, the points 0.2-0.5 m from it
-      (over its length) number under ``max_around`` times its own (a scan row on a facade has
-      the next rows there; wires stacked 0.7 m apart do not);
+                structure_m: float = 1.5, stack_m: float = 1.5, max_stack_deg: float = 10.0, tol_m: float = 0.08,
+                n_searched: int | None = None, wire_like: np.ndarray | None = None) -> list[np.ndarray]:
+    """The ``straight_wires`` runs (within ``tol_m``) of ``xyz`` (wire-like points on no wire)
+    that are wires seen over a few metres, given the points off the ground (``wire_like``: which
+    of them are), those of structures (``steep``: poles, tower bodies) and those of the wires
+    found (``wired``), all (n, 3) in one frame. Runs are drawn from the first ``n_searched``
+    points of ``xyz``; the rest (a stack's ribbon on end that the shape test took for a pole's)
+    only join a stack beside a run kept. A run of ``min_length_m`` is kept when
+    * it stands alone in its cross-section: the points 0.2-0.5 m from it (over its length)
+      number under ``max_around`` times its own, not counting wire-like ones in its vertical or
+      horizontal plane (within 2 ``tol_m``: the wires of a stack or a ribbon beside it). A scan
+      row on a facade has the next rows there, a roof's eave the roof rising from it;
     * it joins the wires found at a support: one end within ``reach_m`` of them (a pole's cross
       arm and insulators), and leads away from them at 30 degrees or more (its other end half
       its length farther; a cross arm lies along under them);
     * it is not a tower's arm: the end nearer the wires found is the one at a structure (more
       ``steep`` points within ``structure_m`` than at the other). A wire across the street leaves
       the pole where the line's wires are held; an arm reaches from the tower's body out to
-      where the conductors hang under its tip."""
-    runs = straight_wires(xyz, min_length_m, max_gap_m)
-    if not runs or not len(wired):
+      where the conductors hang under its tip.
+    Wires one over another (cables from a pole to a house) may be seen over less: two or more
+    runs of half ``min_length_m``, parallel within ``max_stack_deg`` and within ``stack_m`` of
+    each other, each standing alone, are kept when one of them joins the wires found. Beside
+    each run kept (within ``stack_m`` of its axis, along it), the rest of its stack is runs of
+    half its length as parallel, standing alone, searched among all of ``xyz``."""
+    if not len(wired):
         return []
-    every, wires = cKDTree(off_ground), cKDTree(wired)
+    runs = straight_wires(xyz[:n_searched], min_length_m, max_gap_m, tol_m=tol_m)
+    every, wires = _Around(off_ground, wire_like, 2 * tol_m), cKDTree(wired)
     structure = cKDTree(steep) if len(steep) else None
-    kept = []
-    for run in runs:
+    kept = [run for run in runs if _stands_alone(xyz[run], every, max_around) and
+            _joins(xyz[run], wires, structure, reach_m, structure_m)]
+    taken = np.zeros(len(xyz), bool)
+    for run in kept:
+        taken[run] = True
+    tree = cKDTree(xyz)
+    cos_max = np.cos(np.radians(max_stack_deg))
+    # stacks of wires seen over less than min_length
+    rest = np.flatnonzero(~taken[:n_searched])
+    short = [rest[r] for r in straight_wires(xyz[rest], min_length_m / 2, max_gap_m, tol_m=tol_m)]
+    short = [r for r in short if _stands_alone(xyz[r], every, max_around)]
+    for group in _stacks([xyz[r] for r in short], stack_m, cos_max):
+        if len(group) >= 2 and any(_joins(xyz[short[i]], wires, structure, reach_m, structure_m) for i in group):
+            for i in group:
+                kept.append(short[i])
+                taken[short[i]] = True
+    for run in list(kept):  # (a wire found beside one vouches for no other: it is shorter)
         q = xyz[run]
-        u = (q[-1] - q[0]) / max(np.linalg.norm(q[-1] - q[0]), 1e-9)
-        near = np.unique(np.concatenate(every.query_ball_point(q, 0.5)))
-        rel = every.data[near] - q[0]
+        length = float(np.linalg.norm(q[-1] - q[0]))
+        u = (q[-1] - q[0]) / max(length, 1e-9)
+        near = np.asarray(tree.query_ball_point((q[0] + q[-1]) / 2, length / 2 + stack_m), np.int64)
+        rel = xyz[near] - q[0]
         t = rel @ u
-        r = np.linalg.norm(rel - t[:, None] * u, axis=1)
-        around = int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= float((q[-1] - q[0]) @ u))).sum())
-        ends = q[[0, -1]]
-        to_wires = wires.query(ends)[0]
-        at_structure = [len(structure.query_ball_point(e, structure_m)) if structure is not None else 0 for e in ends]
-        nearer = int(np.argmin(to_wires))
-        leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
-        if around < max_around * len(run) and to_wires[nearer] <= reach_m and leaves and \
-                at_structure[nearer] > at_structure[1 - nearer]:
-            kept.append(run)
+        beside = near[~taken[near] & (t >= 0) & (t <= length) &
+                      (np.linalg.norm(rel - t[:, None] * u, axis=1) <= stack_m)]
+        for sub in straight_wires(xyz[beside], length / 2, max_gap_m, tol_m=tol_m, min_points=8):
+            p = xyz[beside[sub]]
+            d = p[-1] - p[0]
+            if abs(d @ u) >= cos_max * np.linalg.norm(d) and _stands_alone(p, every, max_around):
+                taken[beside[sub]] = True
+                # the rest of a run kept (its points the search could not draw from) joins it
+                k = next((k for k, r in enumerate(kept) if _on_axis(xyz[r], p, 2 * tol_m)), None)
+                if k is None:
+                    kept.append(beside[sub])
+                else:
+                    both = np.r_[kept[k], beside[sub]]
+                    kept[k] = both[np.argsort((xyz[both] - xyz[both[0]]) @ (xyz[kept[k][-1]] - xyz[kept[k][0]]))]
     return kept
+
+
+def _on_axis(q, p, tol_m: float) -> bool:
+    """Whether every point of ``p`` lies within ``tol_m`` of the axis of the run ``q``."""
+    u = (q[-1] - q[0]) / max(float(np.linalg.norm(q[-1] - q[0])), 1e-9)
+    rel = p - q[0]
+    return bool(np.all(np.linalg.norm(rel - (rel @ u)[:, None] * u, axis=1) <= tol_m))
+
+
+def _joins(q, wires_tree, structure_tree, reach_m: float, structure_m: float) -> bool:
+    """Whether the run ``q`` joins the wires found at a support and is no tower's arm (see
+    short_wires)."""
+    ends = q[[0, -1]]
+    to_wires = wires_tree.query(ends)[0]
+    at_structure = [len(structure_tree.query_ball_point(e, structure_m)) if structure_tree is not None else 0
+                    for e in ends]
+    nearer = int(np.argmin(to_wires))
+    leaves = to_wires[1 - nearer] - to_wires[nearer] >= 0.5 * float(np.linalg.norm(q[-1] - q[0]))
+    return to_wires[nearer] <= reach_m and leaves and at_structure[nearer] > at_structure[1 - nearer]
+
+
+def _stacks(runs, stack_m: float, cos_max: float) -> list[list[int]]:
+    """Groups of the runs (points in order along each) that lie one beside another: parallel
+    (cosine of their angle at least ``cos_max``), the middle of one within ``stack_m`` of the
+    other's axis, overlapping along it over half the shorter's length."""
+    from scipy.sparse.csgraph import connected_components as components
+
+    n = len(runs)
+    ends = [(q[0], q[-1]) for q in runs]
+    link = np.zeros((n, n), bool)
+    for i in range(n):
+        a, b = ends[i]
+        li = float(np.linalg.norm(b - a))
+        u = (b - a) / max(li, 1e-9)
+        for j in range(i + 1, n):
+            c, d = ends[j]
+            lj = float(np.linalg.norm(d - c))
+            if abs((d - c) @ u) < cos_max * lj:
+                continue
+            rel = (c + d) / 2 - a
+            t = rel @ u
+            tc, td = sorted(((c - a) @ u, (d - a) @ u))
+            if np.linalg.norm(rel - t * u) <= stack_m and min(li, td) - max(0.0, tc) >= 0.5 * min(li, lj):
+                link[i, j] = True
+    _, lab = components(sparse.coo_matrix(link), directed=False)
+    return [list(np.flatnonzero(lab == k)) for k in range(lab.max() + 1)] if n else []
+
+
+class _Around:
+    """The points off the ground around a run (see short_wires), and which of them are wire-like."""
+
+    def __init__(self, xyz, wire_like=None, plane_m: float = 0.16):
+        self.tree, self.plane_m = cKDTree(xyz), plane_m
+        self.wire_like = np.zeros(len(xyz), bool) if wire_like is None else np.asarray(wire_like, bool)
+
+
+def _stands_alone(q, around: _Around, max_around: float) -> bool:
+    """Whether the run ``q`` (its points in order along it) has under ``max_around`` times its
+    own points 0.2-0.5 m from its axis over its length (see short_wires), not counting the
+    wire-like ones in its vertical or horizontal plane (within ``around.plane_m``: two wires'
+    points each scatter up to a run's tolerance from their axes). The wires of a stack hang
+    one over another, a ribbon's side by side; a roof's next scan rows rise away from its eave."""
+    length = float(np.linalg.norm(q[-1] - q[0]))
+    u = (q[-1] - q[0]) / max(length, 1e-9)
+    near = np.unique(np.concatenate(around.tree.query_ball_point(q, 0.5))).astype(np.int64)
+    rel = around.tree.data[near] - q[0]
+    t = rel @ u
+    r = np.linalg.norm(rel - t[:, None] * u, axis=1)
+    across = np.array([-u[1], u[0], 0.0]) / max(float(np.hypot(u[0], u[1])), 1e-9)
+    # (the vertical plane's distance along ``across``; the horizontal plane's in height, as the
+    # run is near level)
+    up = rel[:, 2] - t * u[2]
+    stacked = around.wire_like[near] & ((np.abs(rel @ across) <= around.plane_m) | (np.abs(up) <= around.plane_m))
+    return int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= length) & ~stacked).sum()) < max_around * len(q)
+
 
 def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, min_span_m: float, owner=None,
                   owner_length=None, max_sep_m: float = 4.0, max_dz_m: float = 3.0, bin_m: float = 0.1, tol_m: float = 0.15,

@@ -107,11 +107,22 @@ def _run(inputs, params, ctx):
         # wire across its street): straight 3D runs of S_min / 2, the shortest piece of wire the
         # 3D step fits
         t = time.perf_counter()
-        free = keep[line_of < 0]
+        n_free = int((line_of < 0).sum())
         wired = keep[line_of >= 0]
-        found3 = _short_wires(pc, free, off, idx[steep], wired, params, hu, vu)
+        # the wires of a stack beside a short wire are not clutter around it
+        wire_like = np.zeros(len(pc), bool)
+        wire_like[idx[linear | steep]] = True
+        # a stack's wires one over another make a ribbon on end, whose points the shape test may
+        # take for a pole's: they join the search beside a short wire found
+        n_keep = len(keep)
+        keep = np.r_[keep, idx[steep]]
+        line_of, wire_of_pt = np.r_[line_of, np.full(steep.sum(), -1)], np.r_[wire_of_pt, np.full(steep.sum(), -1)]
+        found3 = _short_wires(pc, keep[line_of < 0], off, idx[steep], wired, params, hu, vu, n_searched=n_free,
+                              wire_like=wire_like[off])
         n_before = len(geo)
         lines, geo, spans = _add_pass(found3, lines, geo, spans, line_of, wire_of_pt, hu, params)
+        held = np.r_[np.ones(n_keep, bool), line_of[n_keep:] >= 0]
+        keep, line_of, wire_of_pt = keep[held], line_of[held], wire_of_pt[held]
         n_short = len(geo) - n_before
         timings["short_wires_s"] = time.perf_counter() - t
     n_sibling = 0
@@ -127,6 +138,7 @@ def _run(inputs, params, ctx):
     # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
     # right on it, within 0.1 m in plan (a ribbon's phases or a crown shared their neighbourhood)
     for more, lateral_m in ((idx[steep], 0.25), (idx[~linear & ~steep], 0.1)):
+        more = more[~np.isin(more, keep)]
         m_line, m_wire = points_on_spans(spans, geo, pc.x[more] * hu, pc.y[more] * hu, pc.z[more] * vu,
                                          params["max_rms_3d_m"], lateral_m=lateral_m)
         on = m_line >= 0
@@ -427,15 +439,17 @@ def _fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params):
     return lines, geo, spans, line_of, wire_of_pt
 
 
-def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
+def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, n_searched=None, wire_like=None):
     """``short_wires`` among the wire-like points ``free`` (indices into ``pc``; ``off_ground``,
-    ``steep``, ``wired``: the points off the ground, of structures and of the wires found) as a
-    further pass's result for ``_add_pass`` (one conductor and one straight span per run), or None."""
+    ``steep``, ``wired``: the points off the ground, of structures and of the wires found;
+    ``wire_like``: which of ``off_ground`` are; runs are drawn from the first ``n_searched`` of
+    ``free``, the rest only join a stack beside one) as a further pass's result for
+    ``_add_pass`` (one conductor and one straight span per run), or None."""
     import numpy as np
 
     from .core import short_wires
 
-    if len(free) < 12 or len(wired) == 0:
+    if (len(free) if n_searched is None else n_searched) < 12 or len(wired) == 0:
         return None
     xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
     origin = xyz.min(axis=0)
@@ -444,7 +458,7 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu):
         return np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin
 
     runs = short_wires(xyz - origin, local(off_ground), local(steep), local(wired), params["s_min_m"] / 2,
-                       params["v_max_m"])
+                       params["v_max_m"], n_searched=n_searched, wire_like=wire_like)
     if not runs:
         return None
     lines_xy = []
