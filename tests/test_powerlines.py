@@ -609,6 +609,34 @@ def test_straight_wires_finds_short_wires_fanning_from_a_pole_among_a_crown():
         assert (label[r] == k).sum() >= 36 and (label[r] == -1).sum() <= 2
 
 
+def test_straight_wires_neighbourhoods_searched_once_are_those_of_a_fresh_search(monkeypatch):
+    """A set's neighbourhoods, searched once and thinned as runs leave it, are those a fresh
+    search of the points left finds (same neighbours, same order), so the runs drawn are the
+    same as with a search per draw (the fallback where the pairs would not fit in memory)."""
+    from scipy.spatial import cKDTree
+
+    from toolbox_plugins.powerlines import core
+    from toolbox_plugins.powerlines.core import _ball_pairs, _SetNeighbours, straight_wires
+
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(0, 6, (800, 3))
+    near = _SetNeighbours(cKDTree(pts), 1.0)
+    left = np.arange(len(pts))
+    for gone in (rng.choice(800, 50, replace=False), rng.choice(750, 120, replace=False)):
+        near.remove(gone)
+        left = np.delete(left, gone)
+        i = rng.integers(0, len(left), 200)
+        sid, flat = near.of(i)
+        sid0, flat0 = _ball_pairs(cKDTree(pts[left]), pts[left][i], 1.0)
+        assert np.array_equal(sid, sid0) and np.array_equal(flat, flat0)
+    wires = [_segment(rng, (0, 0, 8.0), (0.5, -5.5, 8.1), 40), _segment(rng, (0, 0, 8.7), (-1.5, -5.0, 8.6), 40)]
+    xyz = np.vstack(wires + [rng.uniform([-4, 0, 6], [4, 6, 11], (1000, 3))])
+    once = straight_wires(xyz, 4.0, 2.5)
+    monkeypatch.setattr(core, "MAX_NEIGHBOUR_PAIRS", 0)
+    each = straight_wires(xyz, 4.0, 2.5)
+    assert len(once) == 2 and len(once) == len(each) and all(np.array_equal(a, b) for a, b in zip(once, each))
+
+
 def test_straight_wires_go_on_past_a_pole_to_the_wires_it_holds():
     """A pole (a steep run of 150 points) linked to the two wires at its top: its run is the most
     populous and comes first, but being too steep it only leaves the set, and the wires it holds

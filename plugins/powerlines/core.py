@@ -269,6 +269,8 @@ WIRE_HEIGHT_RMS_M = 0.08
 # how many of a set's best-supported lines (through distinct points) straight_wires tries before
 # it leaves the set: a cross arm or a pole top's several angles come before a wire beside them
 N_BEST_LINES = 5
+# (pairs of points within min_length / 2 a set's neighbourhoods are kept for: 16 bytes each)
+MAX_NEIGHBOUR_PAIRS = 20_000_000
 
 
 @dataclass
@@ -891,8 +893,13 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
         cm = np.round(xyz[left] - xyz[left].min(axis=0), 3)
         left = left[np.lexsort(cm.T[::-1])]
         rng = np.random.default_rng([seed, len(left)])
+        # each point's neighbourhood searched once per set, where that fits in memory
+        tree = cKDTree(xyz[left])
+        near = _SetNeighbours(tree, min_length_m / 2) if (tree.count_neighbors(tree, min_length_m / 2) - len(left)) \
+            // 2 <= MAX_NEIGHBOUR_PAIRS else None
         while len(left) >= min_points and np.linalg.norm(np.ptp(xyz[left], axis=0)) >= min_length_m:
-            run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng)
+            run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng,
+                                     near.of if near is not None else None)
             if run is None or len(run) < min_points:
                 break
             q = xyz[left[run]]
@@ -901,6 +908,8 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
                 out.append(left[run])
             # a steep run (a pole, a trunk) leaves the set too: wires held on it come next
             left = np.delete(left, run)
+            if near is not None:
+                near.remove(run)
     return out
 
 
@@ -1127,16 +1136,19 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
     return found
 
 
-def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
+def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng, neighbours=None):
     """The most populous straight run in ``p`` (see straight_wires), its indices sorted along it,
-    or None when none reaches ``min_length_m``."""
+    or None when none reaches ``min_length_m``. ``neighbours(i)``: the points of ``p`` within
+    min_length / 2 of its points ``i`` as ``_ball_pairs`` gives them (default: searched here)."""
     n = len(p)
     # pairs drawn locally (the second point within min_length / 2 of the first): a wire of 20
     # points in a set of thousands (linked to a crown) is then drawn as often as the crown
     i = rng.integers(0, n, min(max(n_samples, n), 4 * n_samples))
-    tree = cKDTree(p)
-    near = tree.query_ball_point(p[i], min_length_m / 2)
-    j = np.array([nb[int(rng.integers(0, len(nb)))] for nb in near])
+    # (sample, neighbour) pairs, grouped by sample, each sample's neighbours in index order
+    sid, flat = neighbours(i) if neighbours is not None else _ball_pairs(cKDTree(p), p[i], min_length_m / 2)
+    first = np.searchsorted(sid, np.arange(len(i)))
+    size = np.diff(np.r_[first, len(sid)])
+    j = flat[first + np.array([int(rng.integers(0, m)) for m in size], np.int64)]
     d = p[j] - p[i]
     length = np.linalg.norm(d, axis=1)
     ok = length >= min_length_m / 8
@@ -1145,9 +1157,8 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
     i, d = i[ok], d[ok] / length[ok, None]
     # each line's support counted where its pair was drawn (within min_length / 2 of its first
     # point), all lines at once over their neighbourhoods
-    nb = [near[k] for k in np.flatnonzero(ok)]
-    sid = np.repeat(np.arange(len(i)), [len(x) for x in nb])
-    flat = np.concatenate(nb).astype(np.int64)
+    mine = ok[sid]
+    sid, flat = (np.cumsum(ok) - 1)[sid[mine]], flat[mine]
     rel = p[flat] - p[i][sid]
     t = np.einsum("ij,ij->i", rel, d[sid])
     counts = np.bincount(sid, weights=(np.einsum("ij,ij->i", rel, rel) - t * t) <= tol_m * tol_m, minlength=len(i))
@@ -1166,6 +1177,44 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng):
         if tried == N_BEST_LINES:
             break
     return None
+
+
+def _ball_pairs(tree, q, radius):
+    """(k, index) of each point of ``tree`` within ``radius`` of the point ``q[k]``, grouped by
+    k, indices ascending."""
+    near = tree.query_ball_point(q, radius)  # (several points: each list sorted)
+    sid = np.repeat(np.arange(len(q)), [len(x) for x in near])
+    return sid, (np.concatenate(near).astype(np.int64) if len(sid) else np.zeros(0, np.int64))
+
+
+class _SetNeighbours:
+    """The neighbours within ``radius`` of each point of a set (``tree``), searched once
+    (``straight_wires`` draws from the set a run at a time, and the neighbourhoods barely
+    change): ``of(i)`` gives them among the points still alive (renumbered in order) as
+    ``_ball_pairs`` does."""
+
+    def __init__(self, tree, radius):
+        n = tree.n
+        pairs = tree.query_pairs(radius, output_type="ndarray")
+        rows = np.r_[pairs[:, 0], pairs[:, 1], np.arange(n)]
+        cols = np.r_[pairs[:, 1], pairs[:, 0], np.arange(n)]
+        order = np.lexsort((cols, rows))
+        self.flat = cols[order]
+        self.start = np.r_[0, np.cumsum(np.bincount(rows, minlength=n))]
+        self.alive = np.ones(n, bool)
+
+    def remove(self, positions):
+        """Take the alive points at these positions (in the alive order) out."""
+        self.alive[np.flatnonzero(self.alive)[positions]] = False
+
+    def of(self, i):
+        at = np.flatnonzero(self.alive)[i]
+        size = self.start[at + 1] - self.start[at]
+        sid = np.repeat(np.arange(len(i)), size)
+        cols = self.flat[np.repeat(self.start[at] - np.cumsum(size) + size, size) + np.arange(int(size.sum()))]
+        keep = self.alive[cols]
+        pos = np.cumsum(self.alive) - 1
+        return sid[keep], pos[cols[keep]]
 
 
 def _refined_run(p, a, u, max_gap_m, tol_m):
