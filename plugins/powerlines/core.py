@@ -1325,7 +1325,7 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
 
 
 def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float,
-                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0):
+                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0, own_m: float = 4.0):
     """For points outside the 3D step's candidates (under the height window, or left by the shape
     test next to a tower where a wire's neighbourhood leans on the structure): the conductor and
     wire of the fitted span whose catenary, continued past either end, they extend, else -1.
@@ -1333,8 +1333,10 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     From each end outward, ``free`` points within ``lateral_m`` in plan and the span's fit
     tolerance are taken while no gap along the line exceeds ``max_gap_m``, up to ``reach_m``, and
     stop at the first whose column (``column_m`` in plan, ``column_dz_m`` up and down) holds more
-    points off the catenary than on it: the pole, arm or crown the wire meets. ``px, py, pz``: the
-    off-ground points, ``free`` those not on a wire yet. ``lines`` as for conductors_3d."""
+    points off the catenary than on it, or than the columns of the span's own last ``own_m`` do
+    (the median): the pole, arm or crown the wire meets. (Wires hung one over another fill each
+    other's columns all along.) ``px, py, pz``: the off-ground points, ``free`` those not on a
+    wire yet. ``lines`` as for conductors_3d."""
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
@@ -1343,7 +1345,7 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
             tol = max(3 * sp.rms, 0.15)
             for end, sign in ((sp.s_to, 1.0), (sp.s_from, -1.0)):
                 out = sign * (s - end)
-                zone = np.flatnonzero((out > -column_m) & (out <= reach_m + column_m))
+                zone = np.flatnonzero((out > -own_m - column_m) & (out <= reach_m + column_m))
                 lat = np.abs(off[zone] - (sp.offset + sp.offset_slope * s[zone]))
                 zone, lat = zone[lat <= lateral_m + column_m], lat[lat <= lateral_m + column_m]
                 dz = pz[zone] - catenary(s[zone], sp.z0, sp.s0, sp.c)
@@ -1358,12 +1360,21 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
                 if not len(cand):
                     continue
                 tree = cKDTree(np.column_stack([s[zone], off[zone]]))
+
+                def columns(ks):  # (points on the catenary, points off it) in the column of each
+                    near = tree.query_ball_point(np.column_stack([s[zone[ks]], off[zone[ks]]]), column_m)
+                    res = []
+                    for k, nb in zip(ks, near):
+                        nb = np.asarray(nb)
+                        nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
+                        res.append((int(on[nb].sum()), int((~on[nb]).sum())))
+                    return res
+
+                own = np.flatnonzero(on & (out[zone] <= 0) & (out[zone] > -own_m))
+                ratio = max(1.0, float(np.median([b / a for a, b in columns(own)]))) if len(own) >= 3 else 1.0
                 taken = []
-                for k, nb in zip(cand, tree.query_ball_point(np.column_stack([s[zone[cand]], off[zone[cand]]]),
-                                                             column_m)):
-                    nb = np.asarray(nb)
-                    nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
-                    if on[nb].sum() < (~on[nb]).sum():
+                for k, (n_on, n_off) in zip(cand, columns(cand)):
+                    if n_off > ratio * n_on:
                         break
                     taken.append(zone[k])
                 taken = np.asarray(taken, np.int64)
