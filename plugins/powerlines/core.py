@@ -950,7 +950,6 @@ def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wire
     taken = np.zeros(len(xyz), bool)
     for run in kept:
         taken[run] = True
-    tree = cKDTree(xyz)
     cos_max = np.cos(np.radians(max_stack_deg))
     # stacks of wires seen over less than min_length
     rest = np.flatnonzero(~taken[:n_searched])
@@ -961,15 +960,14 @@ def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wire
             for i in group:
                 kept.append(short[i])
                 taken[short[i]] = True
+    tree = cKDTree(xyz) if kept else None
     for run in list(kept):  # (a wire found beside one vouches for no other: it is shorter)
         q = xyz[run]
         length = float(np.linalg.norm(q[-1] - q[0]))
         u = (q[-1] - q[0]) / max(length, 1e-9)
         near = np.asarray(tree.query_ball_point((q[0] + q[-1]) / 2, length / 2 + stack_m), np.int64)
-        rel = xyz[near] - q[0]
-        t = rel @ u
-        beside = near[~taken[near] & (t >= 0) & (t <= length) &
-                      (np.linalg.norm(rel - t[:, None] * u, axis=1) <= stack_m)]
+        t, r = _along_axis(xyz[near], q[0], u)
+        beside = near[~taken[near] & (t >= 0) & (t <= length) & (r <= stack_m)]
         for sub in straight_wires(xyz[beside], length / 2, max_gap_m, tol_m=tol_m, min_points=8):
             p = xyz[beside[sub]]
             d = p[-1] - p[0]
@@ -988,8 +986,7 @@ def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wire
 def _on_axis(q, p, tol_m: float) -> bool:
     """Whether every point of ``p`` lies within ``tol_m`` of the axis of the run ``q``."""
     u = (q[-1] - q[0]) / max(float(np.linalg.norm(q[-1] - q[0])), 1e-9)
-    rel = p - q[0]
-    return bool(np.all(np.linalg.norm(rel - (rel @ u)[:, None] * u, axis=1) <= tol_m))
+    return bool(np.all(_along_axis(p, q[0], u)[1] <= tol_m))
 
 
 def _joins(q, wires_tree, structure_tree, reach_m: float, structure_m: float) -> bool:
@@ -1232,12 +1229,18 @@ def _refined_run(p, a, u, max_gap_m, tol_m):
     return run[np.argsort(t[run])], float(t[run].max() - t[run].min())
 
 
+def _along_axis(p, a, u):
+    """(position along, distance from) the line through ``a`` along unit ``u`` of the points ``p``."""
+    rel = p - a
+    t = rel @ u
+    return t, np.linalg.norm(rel - t[:, None] * u, axis=1)
+
+
 def _run_along(p, a, u, tol_m, max_gap_m):
     """(positions along the line through ``a`` along unit ``u``, the longest run of the points
     of ``p`` within ``tol_m`` of it without a gap of ``max_gap_m``)."""
-    rel = p - a
-    t = rel @ u
-    on = np.flatnonzero(np.linalg.norm(rel - t[:, None] * u, axis=1) <= tol_m)
+    t, r = _along_axis(p, a, u)
+    on = np.flatnonzero(r <= tol_m)
     return t, (_longest_run(t, on, max_gap_m) if len(on) >= 2 else on)
 
 def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
@@ -1361,14 +1364,11 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
                     continue
                 tree = cKDTree(np.column_stack([s[zone], off[zone]]))
 
-                def columns(ks):  # (points on the catenary, points off it) in the column of each
-                    near = tree.query_ball_point(np.column_stack([s[zone[ks]], off[zone[ks]]]), column_m)
-                    res = []
-                    for k, nb in zip(ks, near):
-                        nb = np.asarray(nb)
+                def columns(ks):  # (points on the catenary, points off it) in the column of each, in turn
+                    for k in ks:
+                        nb = np.asarray(tree.query_ball_point((s[zone[k]], off[zone[k]]), column_m))
                         nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
-                        res.append((int(on[nb].sum()), int((~on[nb]).sum())))
-                    return res
+                        yield int(on[nb].sum()), int((~on[nb]).sum())
 
                 own = np.flatnonzero(on & (out[zone] <= 0) & (out[zone] > -own_m))
                 ratio = max(1.0, float(np.median([b / a for a, b in columns(own)]))) if len(own) >= 3 else 1.0

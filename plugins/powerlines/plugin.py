@@ -137,8 +137,8 @@ def _run(inputs, params, ctx):
     # candidates the shape test left out that lie on a fitted span are its points too: steep ones
     # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
     # right on it, within 0.1 m in plan (a ribbon's phases or a crown shared their neighbourhood)
-    for more, lateral_m in ((idx[steep], 0.25), (idx[~linear & ~steep], 0.1)):
-        more = more[~np.isin(more, keep)]
+    # (steep points a short wire took are on a wire already)
+    for more, lateral_m in ((np.setdiff1d(idx[steep], keep), 0.25), (idx[~linear & ~steep], 0.1)):
         m_line, m_wire = points_on_spans(spans, geo, pc.x[more] * hu, pc.y[more] * hu, pc.z[more] * vu,
                                          params["max_rms_3d_m"], lateral_m=lateral_m)
         on = m_line >= 0
