@@ -1347,6 +1347,45 @@ def test_span_ends_grow_along_a_wire_of_a_stack_up_to_its_pole():
     assert not taken[cable != 0].any() and not taken[ss > 51.6].any()
 
 
+def test_span_ends_of_a_sparse_stack_grow_up_to_a_support_found():
+    """Four cables 0.3 m apart, about 2 points per metre each (a 5 points/m² survey's joint-use
+    stack), each fitted to s = 40, a pole at s = 47.5: the other cables' few points make the columns
+    too noisy for the column test. Given the pole, each cable's points are taken up to 0.5 m before
+    it, by its own span; not the pole, nothing past it. An end facing no support, or a support 3 m
+    aside, grows nothing; nor does a lone wire (its columns do tell the pole)."""
+    from toolbox_plugins.powerlines.core import Span, grow_span_ends
+
+    rng = np.random.default_rng(11)
+    anchor, direction = np.array([0.0, 0.0]), np.array([1.0, 0.0])
+    spans = [Span(0, k, 0, 50.0, 400.0, 12.0 - 0.3 * k, 0.0, 40.0, 0.03, 80, 0.4) for k in range(4)]
+    ss, z, cable = [], [], []
+    for k in range(4):
+        s = np.sort(rng.uniform(30.0, 60.0, 60))
+        ss.append(s), z.append(catenary(s, 12.0 - 0.3 * k, 50.0, 400.0) + rng.normal(0, 0.02, len(s)))
+        cable.append(np.full(len(s), k))
+    pole_z = np.arange(6.0, 13.0, 0.3)
+    ss, z = np.r_[np.concatenate(ss), np.full(len(pole_z), 47.5)], np.r_[np.concatenate(z), pole_z]
+    cable = np.r_[np.concatenate(cable), np.full(len(pole_z), -1)]
+    free = ss > 40.0
+    lines = [(anchor, direction, 0.0, 60.0)]
+    pole = np.array([[47.5, 0.2]])
+    line_of, wire_of = grow_span_ends(spans, lines, ss, np.zeros(len(ss)), z, free, 0.2, max_gap_m=2.5,
+                                      reach_m=16.0, supports=pole)
+    taken = line_of >= 0
+    assert taken[(cable >= 0) & (ss > 40.0) & (ss <= 47.0)].all() and (wire_of[taken] == cable[taken]).all()
+    assert not taken[ss > 47.0].any()
+    # the column test alone stops the top cable within a few points of its end
+    line_of, _ = grow_span_ends(spans, lines, ss, np.zeros(len(ss)), z, free, 0.2, max_gap_m=2.5, reach_m=16.0)
+    assert np.mean(line_of[(cable == 0) & (ss > 40.0) & (ss <= 47.0)] >= 0) < 0.5
+    for support in ([[20.0, 0.0]], [[47.5, 3.0]]):  # behind the ends; beside the wires
+        line_of, _ = grow_span_ends(spans, lines, ss, np.zeros(len(ss)), z, free, 0.2, max_gap_m=2.5,
+                                    reach_m=16.0, supports=np.array(support))
+        assert (line_of == -1).all()
+    line_of, _ = grow_span_ends(spans[:1], lines, ss, np.zeros(len(ss)), z, free, 0.2, max_gap_m=2.5,
+                                reach_m=16.0, supports=pole)
+    assert (line_of == -1).all()
+
+
 def test_a_span_records_how_thin_its_points_are_across_the_line():
     """A wire's lateral scatter about its straight plan trend is what the 3D validation tests
     (WIRE_LATERAL_RMS_M): a drifting but thin wire passes, a crown edge's spread does not."""
@@ -1751,14 +1790,17 @@ def test_distribution_corridor_at_default_parameters(tmp_path):
     assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.97
 
 
-def test_joint_use_corridor_at_default_parameters(tmp_path):
+@pytest.mark.parametrize("cables, density", [(3, None), (4, 5.0)])
+def test_joint_use_corridor_at_default_parameters(tmp_path, cables, density):
     """The distribution corridor with three communication cables 0.3 m apart one above another on
-    line B's poles (a vertical ribbon, as on the Oakland scans' poles): every conductor once, none
-    false, every crossing within 5 cm, and most of the cables' points. Measured: wire-point recall
-    0.965, the cables' own 0.878; the issue's 0.97 is not met yet (see the xfail test of the 3D
-    step on a stack)."""
+    line B's poles (a vertical ribbon, as on the Oakland scans' poles), and four at 5 points/m²
+    (a few points per metre of each cable): every conductor once, none false, every crossing within
+    5 cm, wire-point precision and recall of at least the issue's 0.97, and most of the cables'
+    points. Measured on seed 1: recall 0.981 and 0.972, the cables' own 0.928 and 0.925."""
     path = tmp_path / "comm.laz"
-    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", comm_cables=3, seed=1)
+    extra = {} if density is None else {"density_ppm2": density}
+    toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", comm_cables=cables,
+                seed=1, **extra)
     truth = json.loads(path.with_name("comm_truth.json").read_text())
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
@@ -1772,9 +1814,9 @@ def test_joint_use_corridor_at_default_parameters(tmp_path):
     src = laspy.read(path)
     t14 = np.asarray(src.classification) == 14
     p14 = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
-    assert (t14 & p14).sum() / p14.sum() >= 0.99 and (t14 & p14).sum() / t14.sum() >= 0.96
+    assert (t14 & p14).sum() / p14.sum() >= 0.97 and (t14 & p14).sum() / t14.sum() >= 0.97
     comm = np.isin(np.asarray(src.object_id), [w["id"] for w in truth["wires"] if w["kind"] == "communication"]) & t14
-    assert (comm & p14).sum() / comm.sum() >= 0.85
+    assert (comm & p14).sum() / comm.sum() >= 0.90
 
 
 def test_wire_point_spacing_is_the_median_gap_along_fitted_spans():
@@ -2144,13 +2186,15 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.94, 0.83), ("part3_ak", 0.97, 0.9),
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.92, 0.85), ("part3_ak", 0.97, 0.9),
                                                               ("part2_ai", 0.89, 0.84)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors just under what is reached, not the
-    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.943 /
-    R 0.845 (0.945 / 0.776 before stacks of short wires: a stack's wires counted as clutter
+    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.928 /
+    R 0.861 (0.943 / 0.845 before a stack's wires grew up to their poles: +40 points labelled
+    wire, +41 not, which lie on the wires' paths in the last 1-2 m before the poles, where the
+    labels stop; 0.945 / 0.776 before stacks of short wires: a stack's wires counted as clutter
     around each other; tangles and risers at pole tops are missed);
     part3_ak, wires seen for 5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top
     edge was taken for a wire); part2_ai: 0.899 / 0.841 (0.806 / 0.804 before the next span past

@@ -1328,7 +1328,8 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
 
 
 def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float,
-                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0, own_m: float = 4.0):
+                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0, own_m: float = 4.0,
+                   supports=None, support_m: float = 2.0, margin_m: float = 0.5, stack_m: float = 1.5):
     """For points outside the 3D step's candidates (under the height window, or left by the shape
     test next to a tower where a wire's neighbourhood leans on the structure): the conductor and
     wire of the fitted span whose catenary, continued past either end, they extend, else -1.
@@ -1339,50 +1340,89 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     points off the catenary than on it, or than the columns of the span's own last ``own_m`` do
     (the median): the pole, arm or crown the wire meets. (Wires hung one over another fill each
     other's columns all along.) ``px, py, pz``: the off-ground points, ``free`` those not on a
-    wire yet. ``lines`` as for conductors_3d."""
+    wire yet. ``lines`` as for conductors_3d.
+
+    With ``supports`` (an (n, 2) array of found poles and towers in plan), only the ends of a
+    stack's wires (another wire of the line within ``stack_m`` over or under the end) facing a
+    support within ``reach_m`` along the line and ``support_m`` across the wire grow, up to
+    ``margin_m`` before it, with no column test: in a sparse stack the other wires' few points
+    per column make the ratio noise, and the support, once found, tells where the wire ends."""
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
     for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
+        if supports is not None:
+            anchor, direction, _, _ = lines[li]
+            d = np.asarray(supports, float).reshape(-1, 2) - anchor
+            sup_s, sup_off = d @ direction, d @ [-direction[1], direction[0]]
         for sp in line_spans:
             tol = max(3 * sp.rms, 0.15)
             for end, sign in ((sp.s_to, 1.0), (sp.s_from, -1.0)):
                 out = sign * (s - end)
-                zone = np.flatnonzero((out > -own_m - column_m) & (out <= reach_m + column_m))
+                limit = np.inf
+                if supports is not None:
+                    ahead_of = sign * (sup_s - end)
+                    facing = (ahead_of > 0) & (ahead_of <= reach_m) & (
+                        np.abs(sup_off - (sp.offset + sp.offset_slope * sup_s)) <= support_m)
+                    if not facing.any() or not _stacked_at(sp, end, sign, line_spans, own_m, stack_m):
+                        continue
+                    limit = float(ahead_of[facing].min()) - margin_m
+                zone = np.flatnonzero((out > -own_m - column_m) & (out <= min(reach_m, limit) + column_m))
                 lat = np.abs(off[zone] - (sp.offset + sp.offset_slope * s[zone]))
                 zone, lat = zone[lat <= lateral_m + column_m], lat[lat <= lateral_m + column_m]
                 dz = pz[zone] - catenary(s[zone], sp.z0, sp.s0, sp.c)
                 on = (lat <= lateral_m) & (np.abs(dz) <= tol)
                 # the gaps along the wire count its points on a wire already too (another span's,
                 # a candidate's), then the free ones up to the first gap are taken
-                ahead = np.flatnonzero(on & (out[zone] > 0))
+                ahead = np.flatnonzero(on & (out[zone] > 0) & (out[zone] <= limit))
                 ahead = ahead[np.argsort(out[zone[ahead]])]
                 steps = np.diff(np.r_[0.0, out[zone[ahead]]])
                 ahead = ahead[: int(np.argmax(np.r_[steps, np.inf] > max_gap_m))]
                 cand = ahead[free[zone[ahead]]]
                 if not len(cand):
                     continue
-                tree = cKDTree(np.column_stack([s[zone], off[zone]]))
+                if np.isfinite(limit):
+                    taken = zone[cand]
+                else:
+                    tree = cKDTree(np.column_stack([s[zone], off[zone]]))
 
-                def columns(ks):  # (points on the catenary, points off it) in the column of each, in turn
-                    for k in ks:
-                        nb = np.asarray(tree.query_ball_point((s[zone[k]], off[zone[k]]), column_m))
-                        nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
-                        yield int(on[nb].sum()), int((~on[nb]).sum())
+                    def columns(ks):  # (points on the catenary, points off it) in the column of each, in turn
+                        for k in ks:
+                            nb = np.asarray(tree.query_ball_point((s[zone[k]], off[zone[k]]), column_m))
+                            nb = nb[np.abs(dz[nb] - dz[k]) <= column_dz_m]
+                            yield int(on[nb].sum()), int((~on[nb]).sum())
 
-                own = np.flatnonzero(on & (out[zone] <= 0) & (out[zone] > -own_m))
-                ratio = max(1.0, float(np.median([b / a for a, b in columns(own)]))) if len(own) >= 3 else 1.0
-                taken = []
-                for k, (n_on, n_off) in zip(cand, columns(cand)):
-                    if n_off > ratio * n_on:
-                        break
-                    taken.append(zone[k])
-                taken = np.asarray(taken, np.int64)
+                    own = np.flatnonzero(on & (out[zone] <= 0) & (out[zone] > -own_m))
+                    ratio = max(1.0, float(np.median([b / a for a, b in columns(own)]))) if len(own) >= 3 else 1.0
+                    taken = []
+                    for k, (n_on, n_off) in zip(cand, columns(cand)):
+                        if n_off > ratio * n_on:
+                            break
+                        taken.append(zone[k])
+                    taken = np.asarray(taken, np.int64)
                 r = np.abs(pz[taken] - catenary(s[taken], sp.z0, sp.s0, sp.c))
                 better = r < best[taken]
                 best[taken[better]] = r[better]
                 line_of[taken[better]], wire_of[taken[better]] = li, sp.wire
     return line_of, wire_of
+
+
+def _stacked_at(sp, end, sign, line_spans, own_m: float, stack_m: float, across_m: float = 0.5) -> bool:
+    """Whether another wire of the line hangs over or under span ``sp`` near its ``end`` (within
+    ``stack_m`` in height and ``across_m`` in plan, along its last ``own_m``): a stack."""
+    s = np.linspace(end - sign * own_m, end, 5)
+    for other in line_spans:
+        if other.wire == sp.wire:
+            continue
+        inside = (s >= other.s_from) & (s <= other.s_to)
+        if not inside.any():
+            continue
+        si = s[inside]
+        dz = np.abs(catenary(si, other.z0, other.s0, other.c) - catenary(si, sp.z0, sp.s0, sp.c))
+        doff = np.abs(other.offset + other.offset_slope * si - sp.offset - sp.offset_slope * si)
+        if np.any((dz <= stack_m) & (doff <= across_m)):
+            return True
+    return False
 
 
 def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float, min_span_m: float,

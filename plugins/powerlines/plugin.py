@@ -225,6 +225,24 @@ def _run(inputs, params, ctx):
         pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu,
                                           dtm, params, also=[found[i] for i in sorted(set(with_arms))] +
                                           [passed_by[i] for i in sorted(set(own_arms))])
+    if params["grow_spans"] and found:
+        # with the supports found, a stack's wires grow up to the pole or tower they face: in a
+        # sparse stack the other wires' few points made the columns too noisy to tell the support
+        t_grow = time.perf_counter()
+        low = off[hag[off] >= 1.0]
+        g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
+                                        conductor_of[low] < 0, params["max_rms_3d_m"],
+                                        max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"],
+                                        supports=np.array([[p.x, p.y] for p in found]))
+        on = g_line >= 0
+        keep = np.r_[keep, low[on]]
+        line_of, wire_of_pt = np.r_[line_of, g_line[on]], np.r_[wire_of_pt, g_wire[on]]
+        conductor_of[low[on]] = g_line[on]
+        grown = np.r_[grown, low[on]]
+        if on.any():  # a tower's footprint may have grown along the wires' points now taken
+            pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu,
+                                              vu, dtm, params, also=found)
+        timings["grow_spans_s"] = timings.get("grow_spans_s", 0.0) + time.perf_counter() - t_grow
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
         # on AHN4: the wire between the arms is class 15)
@@ -1202,7 +1220,8 @@ def toolbox_algorithms():
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
             "cross-section; n_short_wires), and beside each fitted span for a phase too sparse to find alone "
             "(sibling_wires, n_sibling_wires); each span's catenary continued past its ends takes the wire where the "
-            "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), the wire "
+            "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), a stack's "
+            "wires (one within 1.5 m over or under another) up to the pole or tower found ahead, and the wire "
             "across a found tower's footprint being the tower's; a wire point farther across its span's plan trend "
             "than 3 robust sigma (at least 0.05 m) with other points off the ground within 0.3 m is foliage the "
             "wire runs through (n_off_trend_points), and so is one where, within 1 m along the wire, the points "
