@@ -1350,10 +1350,12 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)
+    if supports is not None:
+        supports = np.asarray(supports, float).reshape(-1, 2)
     for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
         if supports is not None:
             anchor, direction, _, _ = lines[li]
-            d = np.asarray(supports, float).reshape(-1, 2) - anchor
+            d = supports - anchor
             sup_s, sup_off = d @ direction, d @ [-direction[1], direction[0]]
         for sp in line_spans:
             tol = max(3 * sp.rms, 0.15)

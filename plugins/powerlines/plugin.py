@@ -148,9 +148,9 @@ def _run(inputs, params, ctx):
     # a span's catenary continued past its ends picks up its wire where the candidates stopped
     # (under the height window on a slope; next to a tower, where the shape test sees the structure)
     grown = np.zeros(0, np.int64)
+    low = off[hag[off] >= 1.0]  # what the growth and the next spans search: off the ground, 1 m up
     if params["grow_spans"]:
         t = time.perf_counter()
-        low = off[hag[off] >= 1.0]
         g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
                                         ~np.isin(low, keep[line_of >= 0]), params["max_rms_3d_m"],
                                         max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"])
@@ -190,7 +190,6 @@ def _run(inputs, params, ctx):
         # past its last support a wire hangs in a new catenary; seen sparsely among crowns, the
         # shape test and the Hough had too few of its points
         t = time.perf_counter()
-        low = off[hag[off] >= 1.0]
         lines, geo, spans, keep, line_of, wire_of_pt, n_next = _next_spans(pc, low, keep, lines, geo, spans, line_of,
                                                                          wire_of_pt, params, hu, vu)
         timings["next_spans_s"] = time.perf_counter() - t
@@ -198,7 +197,6 @@ def _run(inputs, params, ctx):
     if params["bridge_gaps"] and spans:
         # between two pieces of a wire on one catenary (it ran through a crown): the wire
         t = time.perf_counter()
-        low = off[hag[off] >= 1.0]
         lines, geo, spans, keep, line_of, wire_of_pt, n_bridges = _bridge_gaps(
             pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu)
         timings["bridge_gaps_s"] = time.perf_counter() - t
@@ -229,7 +227,6 @@ def _run(inputs, params, ctx):
         # with the supports found, a stack's wires grow up to the pole or tower they face: in a
         # sparse stack the other wires' few points made the columns too noisy to tell the support
         t_grow = time.perf_counter()
-        low = off[hag[off] >= 1.0]
         g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
                                         conductor_of[low] < 0, params["max_rms_3d_m"],
                                         max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"],
@@ -239,10 +236,12 @@ def _run(inputs, params, ctx):
         line_of, wire_of_pt = np.r_[line_of, g_line[on]], np.r_[wire_of_pt, g_wire[on]]
         conductor_of[low[on]] = g_line[on]
         grown = np.r_[grown, low[on]]
+        grow_time = time.perf_counter() - t_grow  # counted with the growth, not the pylons
+        timings["grow_spans_s"] = timings.get("grow_spans_s", 0.0) + grow_time
+        t += grow_time
         if on.any():  # a tower's footprint may have grown along the wires' points now taken
             pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu,
                                               vu, dtm, params, also=found)
-        timings["grow_spans_s"] = timings.get("grow_spans_s", 0.0) + time.perf_counter() - t_grow
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
         # on AHN4: the wire between the arms is class 15)
