@@ -1001,6 +1001,71 @@ def _joins(q, wires_tree, structure_tree, reach_m: float, structure_m: float) ->
     return to_wires[nearer] <= reach_m and leaves and at_structure[nearer] > at_structure[1 - nearer]
 
 
+def wires_from_poles(xyz: np.ndarray, poles: np.ndarray, off_ground: np.ndarray, min_length_m: float,
+                     max_gap_m: float, wire_like: np.ndarray | None = None, reach_m: float = 5.0,
+                     head_m: float = 1.8, max_around: float = 0.5, tol_m: float = 0.08) -> list[np.ndarray]:
+    """The straight runs (``straight_wires``, ``tol_m``) of at least ``min_length_m`` among
+    ``xyz`` (wire-like points on no wire or support) that lead from a pole found: a wire seen
+    over a few metres where it leaves its pole, too short for ``short_wires`` (which has only
+    the wires found to go by). ``poles``: (k, 4) of x, y, base and top height (z) of each pole;
+    ``off_ground``, ``wire_like``: as short_wires, for its stand-alone test; all in one frame,
+    metres. A run is continued along its own axis across gaps under ``max_gap_m`` (the view
+    blocked for a metre or two) and kept when
+    * it stands alone in its cross-section (see short_wires);
+    * its nearer end lies within ``reach_m`` of a pole's axis in plan, its farther end farther
+      by half its length (it leads away; a run along the street past the pole does not) and at
+      least twice ``min_length_m`` out (farther than a street light's or a bracket's arm reaches);
+    * continued toward that pole, it passes within ``head_m`` of the axis (a cross arm's reach)
+      between 1 m over its base and its top: where a wire is held.
+    Returns the runs, indices into ``xyz`` sorted along each."""
+    if not len(poles) or len(xyz) < 12:
+        return []
+    axes = cKDTree(poles[:, :2])
+    # only points a run reaching a pole may hold
+    near = np.flatnonzero(axes.query(xyz[:, :2], distance_upper_bound=reach_m + 2 * min_length_m)[0] < np.inf)
+    if len(near) < 12:
+        return []
+    runs = [near[r] for r in straight_wires(xyz[near], min_length_m, max_gap_m, tol_m=tol_m)]
+    every = _Around(off_ground, wire_like, 2 * tol_m)
+    taken = np.zeros(len(xyz), bool)
+    kept = []
+    for r in runs:
+        if taken[r].any():
+            continue
+        q = xyz[r]
+        u = (q[-1] - q[0]) / max(float(np.linalg.norm(q[-1] - q[0])), 1e-9)
+        pool = near[~taken[near]]
+        run, length = _refined_run(xyz[pool], q.mean(axis=0), u, max_gap_m, tol_m)
+        run = pool[run] if len(run) >= len(r) else r
+        if _leads_from_pole(xyz[run], poles, reach_m, head_m, 2 * min_length_m) and \
+                _stands_alone(xyz[run], every, max_around):
+            kept.append(run)
+            taken[run] = True
+    return kept
+
+
+def _leads_from_pole(q, poles, reach_m: float, head_m: float, out_m: float) -> bool:
+    """Whether the run ``q`` (points in order along it) leads from one of the ``poles`` out to
+    ``out_m`` from its axis (see wires_from_poles)."""
+    ends = q[[0, -1]]
+    d = np.hypot(ends[:, None, 0] - poles[None, :, 0], ends[:, None, 1] - poles[None, :, 1])
+    length = float(np.linalg.norm(ends[1] - ends[0]))
+    for k in np.flatnonzero((d.min(axis=0) <= reach_m) & (np.abs(d[0] - d[1]) >= 0.5 * length) &
+                            (d.max(axis=0) >= out_m)):
+        near_end = int(np.argmin(d[:, k]))
+        a, b = ends[near_end], ends[1 - near_end]
+        u = (a - b) / max(length, 1e-9)  # toward the pole
+        h = float(np.hypot(u[0], u[1]))
+        if h < 1e-6:
+            continue
+        # where the run's line comes nearest the axis in plan
+        t = max(0.0, float((poles[k, :2] - a[:2]) @ u[:2]) / (h * h))
+        at = a + t * u
+        if np.hypot(*(at[:2] - poles[k, :2])) <= head_m and poles[k, 2] + 1.0 <= at[2] <= poles[k, 3]:
+            return True
+    return False
+
+
 def _stacks(runs, stack_m: float, cos_max: float) -> list[list[int]]:
     """Groups of the runs (points in order along each) that lie one beside another: parallel
     (cosine of their angle at least ``cos_max``), the middle of one within ``stack_m`` of the

@@ -254,6 +254,38 @@ def _run(inputs, params, ctx):
         conductor_of[gone] = -1
         tower_pt[gone] = True
     timings["pylons_s"] = time.perf_counter() - t
+    n_pole_wires = 0
+    if params["short_wires"] and any(p.kind == "pole" for p in found):
+        # with the poles known, a wire seen over a few metres where it leaves one (too short to
+        # join the wires found as short_wires asks)
+        t = time.perf_counter()
+        more = np.setdiff1d(idx[linear], keep)  # (the growth dropped none; the rest are in keep)
+        n_keep = len(keep)
+        keep = np.r_[keep, more]
+        line_of, wire_of_pt = np.r_[line_of, np.full(len(more), -1)], np.r_[wire_of_pt, np.full(len(more), -1)]
+        free = keep[line_of < 0]
+        found4 = _wires_from_poles(pc, free, ~tower_pt[free] & np.isin(free, idx[linear]), off, idx[linear | steep],
+                                   [p for p in found if p.kind == "pole"], dtm, params, hu, vu)
+        if found4 is not None:
+            n_before, was, old = len(geo), line_of < 0, {id(sp) for sp in spans}
+            lines, geo, spans = _add_pass(found4, lines, geo, spans, line_of, wire_of_pt, hu, params)
+            n_pole_wires = len(geo) - n_before
+            now = was & (line_of >= 0)
+            conductor_of[keep[now]] = line_of[now]
+        held = np.r_[np.ones(n_keep, bool), line_of[n_keep:] >= 0]
+        keep, line_of, wire_of_pt = keep[held], line_of[held], wire_of_pt[held]
+        if found4 is not None:
+            # the rest of their points, off the run's tolerance or not wire-like (as for the spans
+            # found before: next to a pole top a wire point's neighbourhood leans on the pole)
+            more = low[(conductor_of[low] < 0) & ~tower_pt[low]]
+            m_line, m_wire = points_on_spans([sp for sp in spans if id(sp) not in old], geo, pc.x[more] * hu,
+                                             pc.y[more] * hu, pc.z[more] * vu, params["max_rms_3d_m"],
+                                             lateral_m=0.25)
+            on = m_line >= 0
+            keep = np.r_[keep, more[on]]
+            line_of, wire_of_pt = np.r_[line_of, m_line[on]], np.r_[wire_of_pt, m_wire[on]]
+            conductor_of[more[on]] = m_line[on]
+        timings["pole_wires_s"] = time.perf_counter() - t
 
     # a wire's points lie on its plan trend; the foliage it runs through, on its catenary in height,
     # scatters across it
@@ -333,7 +365,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -484,6 +516,36 @@ def _short_wires(pc, free, off_ground, steep, wired, params, hu, vu, n_searched=
         d = q[-1, :2] - q[0, :2]
         L = float(np.hypot(*d))
         lines_xy.append((q[0, :2], d / max(L, 1e-9), L, [run]))
+    return _straight_conductors(pc, xyz, lines_xy, hu)
+
+
+def _wires_from_poles(pc, free, searched, off_ground, wire_like, poles, dtm, params, hu, vu):
+    """``wires_from_poles`` among the points ``free`` (indices into ``pc``; runs drawn from
+    those where ``searched``), with ``off_ground`` and the ``wire_like`` points among them for
+    the stand-alone test and the ``poles`` found, as a further pass's result for ``_add_pass``
+    (one conductor and one straight span per run), or None."""
+    import numpy as np
+
+    from .core import wires_from_poles
+
+    sub = np.flatnonzero(searched)
+    if len(sub) < 12:
+        return None
+    xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
+    origin = xyz.min(axis=0)
+    base = dtm.sample(np.array([p.x / hu for p in poles]), np.array([p.y / hu for p in poles])) * vu
+    axes = np.column_stack([[p.x for p in poles], [p.y for p in poles], base, base + [p.height_m for p in poles]])
+    ground = np.column_stack([pc.x[off_ground] * hu, pc.y[off_ground] * hu, pc.z[off_ground] * vu])
+    runs = wires_from_poles(xyz[sub] - origin, axes - np.r_[origin, origin[2]], ground - origin,
+                            params["s_min_m"] / 4, params["v_max_m"], wire_like=np.isin(off_ground, wire_like))
+    if not runs:
+        return None
+    lines_xy = []
+    for run in runs:
+        q = xyz[sub[run]]
+        d = q[-1, :2] - q[0, :2]
+        L = float(np.hypot(*d))
+        lines_xy.append((q[0, :2], d / max(L, 1e-9), L, [sub[run]]))
     return _straight_conductors(pc, xyz, lines_xy, hu)
 
 
@@ -1217,7 +1279,9 @@ def toolbox_algorithms():
             "into it), and what is still left for "
             "straight 3D runs of S_min / 2 (short_wires: a mobile scan's wires across the street, fanning from "
             "a pole; one must leave the wires found at a support, lead away from them and stand alone in its "
-            "cross-section; n_short_wires), and beside each fitted span for a phase too sparse to find alone "
+            "cross-section; n_short_wires; after the pylons, a run of S_min / 4 that leads from a found pole, "
+            "continued along its axis across gaps under V_max, aimed within 1.8 m of the pole's axis under its top and "
+            "reaching S_min / 2 from it: n_pole_wires), and beside each fitted span for a phase too sparse to find alone "
             "(sibling_wires, n_sibling_wires); each span's catenary continued past its ends takes the wire where the "
             "candidates stopped (under the height window, beside a tower; grow_spans, n_grown_points), a stack's "
             "wires (one within 1.5 m over or under another) up to the pole or tower found ahead, and the wire "
@@ -1294,7 +1358,8 @@ def toolbox_algorithms():
                       "stretch past a bend, wires outvoted in a tile); its lines must hold mostly wire"),
             Parameter("short_wires", bool, True, "search what is left for straight 3D runs of wire-like points "
                       "S_min / 2 long: wires seen over a few metres only (a mobile scan's wires across the street) "
-                      "that the 2D Hough's S_min misses"),
+                      "that the 2D Hough's S_min misses; and, with the poles found, runs of S_min / 4 leading "
+                      "from a pole"),
             Parameter("sibling_wires", bool, True, "search beside each fitted span (band_m to 4 m across, 3 m up "
                       "or down) for a phase too sparse to find alone: points at one offset across it and one height "
                       "above its catenary, a catenary of their own over half the span or more"),
