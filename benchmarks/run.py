@@ -975,7 +975,7 @@ def _score_poles(las, gpkg: Path) -> dict:
 
 def _score_corridor(truth: dict, gpkg: Path) -> dict:
     """A synthetic corridor's layers against its truth: conductors by ``conductor_hits``,
-    crossings and towers by distance."""
+    crossings and towers by distance (the towers standing in the scene)."""
     import geopandas as gpd
 
     from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
@@ -987,8 +987,10 @@ def _score_corridor(truth: dict, gpkg: Path) -> dict:
     cr_xy = np.column_stack([cr.geometry.x, cr.geometry.y]) if len(cr) else np.zeros((0, 2))
     cr_err = crossing_errors(cr_xy, truth)
     py = gpd.read_file(gpkg, layer="pylons")
+    # towers standing outside the scene (holding the wires' ends, unsurveyed) are not to be found,
+    # nor is one found there false
     tow = [float(np.min(np.hypot(py.geometry.x - q["x"], py.geometry.y - q["y"]))) if len(py) else np.inf
-           for q in truth["pylons"]]
+           for q in truth["pylons"] if q.get("in_scene", True)]
     false_tow = sum(min((np.hypot(x - q["x"], y - q["y"]) for q in truth["pylons"]), default=np.inf) > 2.0
                     for x, y in zip(py.geometry.x, py.geometry.y))
     return {"n_conductors_truth": len(truth["conductor_lines_2d"]), "n_conductors_found": len(matched),

@@ -283,3 +283,22 @@ def test_truth_geopackage_layers(tmp_path):
     assert all(isinstance(g, gpd.GeoDataFrame) and g.crs.to_epsg() == 25832 for g in layers.values())
     assert layers["truth_catenaries"].geometry.has_z.all()
     assert len(layers["truth_crossings"]) > 0
+
+
+def test_a_tower_outside_the_scene_holds_its_wires_but_is_not_surveyed():
+    """60 m spans (seed 1): line A's last tower stands past the scene's east edge. Its wires' ends
+    are there, but no point of it (nor of anything) lies outside the scene, and the truth says it
+    stands outside, so a scorer does not ask for it."""
+    s = make_scene("corridor", seed=1, density_ppm2=3.0, span_m=60.0)
+    W, H = s.extent
+    u, v = s.x - s.origin[0], s.y - s.origin[1]
+    assert u.min() >= 0 and u.max() <= W and v.min() >= 0 and v.max() <= H
+    flags = [(p["in_scene"], 0 <= p["x"] - s.origin[0] <= W and 0 <= p["y"] - s.origin[1] <= H)
+             for p in s.truth["pylons"]]
+    assert all(a == b for a, b in flags)
+    assert sum(not a for a, _ in flags) >= 1 and sum(a for a, _ in flags) >= 15
+    # the towers inside keep their points: each has tower points within 6 m of its base
+    tower = s.fields["classification"] == 15
+    for p in s.truth["pylons"]:
+        if p["in_scene"] and p["line"] == "A":
+            assert (np.hypot(s.x[tower] - p["x"], s.y[tower] - p["y"]) < 6.0).sum() > 20

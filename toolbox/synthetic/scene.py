@@ -237,6 +237,10 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     allp = pts.concat()
     if scanner == "mobile":
         allp = _mobile_thinning(allp, lines[0], terrain, rng, track_offset_m, full_density_range_m)
+    # a tower outside the scene holds its wires' ends but is not surveyed: its points (and the
+    # ground under them) are clipped as the wires' are (after the thinning's draws, which stay)
+    inside = (allp["u"] >= 0) & (allp["u"] <= W) & (allp["v"] >= 0) & (allp["v"] <= H)
+    allp = {k: val[inside] for k, val in allp.items()}
     order = np.lexsort((allp["ret"], allp["pulse"]))  # acquisition order: by pulse, then return
     allp = {k: val[order] for k, val in allp.items()}
     ox, oy = origin
@@ -651,7 +655,8 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
         pid = int(2000 + wire_base + ti)
         truth["pylons"].append({"id": pid, "line": line["name"], "model": model.name, "x": float(t[0] + ox),
                                 "y": float(t[1] + oy), "z": zb, "heading_deg": float(np.degrees(heading) % 360.0),
-                                "roll_deg": 0.0, "pitch_deg": 0.0, "height_m": model.height_m})
+                                "roll_deg": 0.0, "pitch_deg": 0.0, "height_m": model.height_m,
+                                "in_scene": bool(0 <= t[0] <= terrain.width_m and 0 <= t[1] <= terrain.height_m)})
         local = sample_segments(model.segments, 0.3, rng, keep=0.55)
         # tower frame: x across the line, y along it
         uu = t[0] + local[:, 0] * across[0] + local[:, 1] * d[0]
