@@ -36,8 +36,8 @@ def truth_layers(scene, crs) -> dict:
              "heading_deg": b["heading_deg"], "eave_z": b["eave_z"], "top_z": b["top_z"], "pitch_deg": b["pitch_deg"]}
             for b in t["buildings"]]
     layers["truth_buildings"] = _gdf(rows, [Polygon(b["footprint"]) for b in t["buildings"]], crs, "Polygon")
-    rows = [{**{k: p[k] for k in ("id", "line", "model", "z", "heading_deg", "roll_deg", "pitch_deg", "height_m")},
-             "in_scene": p.get("in_scene", True)} for p in t["pylons"]]
+    rows = [{k: p[k] for k in ("id", "line", "model", "z", "heading_deg", "roll_deg", "pitch_deg", "height_m",
+                               "in_scene")} for p in t["pylons"]]
     layers["truth_pylons"] = _gdf(rows, [Point(p["x"], p["y"]) for p in t["pylons"]], crs, "Point")
     rows = [{k: tr[k] for k in ("id", "ground_z", "top_z", "radius_m", "conifer", "asprs_class")} for tr in t["trees"]]
     layers["truth_trees"] = _gdf(rows, [Point(tr["x"], tr["y"]) for tr in t["trees"]], crs, "Point")
