@@ -2622,6 +2622,51 @@ def test_a_wire_through_a_crown_is_bridged_between_its_pieces(seed):
     assert bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], free, 0.2, max_gap_m=12.0) == []
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_wire_askew_to_its_line_is_bridged_past_a_crown_clump_on_a_short_piece(seed):
+    """The case of Oakland part2_ai's lower wire: the wire runs 0.6 degrees askew to its 2D line
+    (0.14 m across over the 14 m gap), and its piece past the crown is short (8 m) with 4 of the
+    crown's points at its gap end linked to it (on its catenary, 0.4 m beside the wire). The two
+    pieces' trends meet mid-gap, robustly fitted, and the gap's wire points are taken; a second
+    wire askew the other way past the crown (0.3 m off mid-gap) is not joined to the first."""
+    from toolbox_plugins.powerlines.core import _span, bridge_gaps, fit_catenary
+
+    rng = np.random.default_rng(seed)
+    askew = 0.01
+
+    def wire(s, slope, at=0.0):
+        return np.column_stack([s, at + slope * s + rng.normal(0, 0.02, len(s)),
+                                catenary(s, 20.0, 40.0, 900.0) + rng.normal(0, 0.03, len(s))])
+
+    def scene(b_slope, b_at=0.0):
+        a = wire(np.sort(rng.uniform(0.0, 33.0, 110)), askew)
+        gap = wire(np.sort(rng.uniform(33.5, 46.5, 40)), askew)
+        b = wire(np.sort(rng.uniform(47.0, 55.0, 27)), b_slope, b_at)
+        clump = np.column_stack([rng.uniform(47.0, 47.6, 4), b_at + b_slope * 47.3 - 0.4 + rng.normal(0, 0.05, 4),
+                                 catenary(rng.uniform(47.0, 47.6, 4), 20.0, 40.0, 900.0)])
+        b = np.vstack([clump, b])
+        d = rng.normal(size=(3000, 3))
+        crown = np.array([40.0, 0.4, 19.5]) + 3.0 * d / np.linalg.norm(d, axis=1)[:, None] * \
+            rng.uniform(0, 1, (3000, 1)) ** (1 / 3)
+        pts = np.vstack([a, b, gap, crown])
+        spans = [_span(0, 0, i, q[:, 0], q[:, 1], fit_catenary(q[:, 0], q[:, 2]), z=q[:, 2]) for i, q in enumerate((a, b))]
+        wire_of = np.r_[np.zeros(len(a) + len(b), int), np.full(len(gap) + len(crown), -1)]
+        is_gap = np.r_[np.zeros(len(a) + len(b), bool), np.ones(len(gap), bool), np.zeros(len(crown), bool)]
+        return spans, pts, wire_of, is_gap
+
+    line = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 60.0)
+    spans, p, wire_of, is_gap = scene(askew)
+    line_of = np.where(wire_of >= 0, 0, -1)
+    found = bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], wire_of < 0, 0.2, max_gap_m=16.0,
+                        line_of=line_of, wire_of=wire_of)
+    assert len(found) == 1
+    k = found[0][2]
+    assert is_gap[k].sum() >= 0.9 * is_gap.sum() and is_gap[k].mean() >= 0.8
+    spans, p, wire_of, is_gap = scene(-askew, b_at=1.1)
+    assert bridge_gaps(spans, [line], p[:, 0], p[:, 1], p[:, 2], wire_of < 0, 0.2, max_gap_m=16.0,
+                       line_of=line_of, wire_of=wire_of) == []
+
+
 def test_a_short_stub_runs_along_a_line_its_ends_lie_on():
     """A 9.5 m stub the Hough leant 1.4 deg off its wire runs along the long line both its ends
     lie within band_m of (its angle is loose over that length); a 30 m line at that angle, its

@@ -304,6 +304,33 @@ def line_fit(x, y) -> tuple[float, float]:
     return slope, ym - slope * xm
 
 
+def median_line_fit(x, y, max_pairs: int = 256, max_points: int = 512) -> tuple[float, float]:
+    """(slope, intercept) of the line through two of the points that leaves the smallest median
+    absolute residual (least median of squares, Rousseeuw 1984): a wire's plan trend where up to
+    half of what was linked to it is a crown's scatter, which pulls a least-squares line (a clump
+    at one end tilts it). Pairs at least a quarter of the points' extent apart; all of them up to
+    ``max_pairs``, else that many drawn (seeded); residuals counted on at most ``max_points``."""
+    n = len(x)
+    if n < 3:
+        return line_fit(x, y)
+    order = np.argsort(x, kind="stable")
+    ev = order[::-(-n // max_points)]
+    rng = np.random.default_rng(0)
+    i, j = np.triu_indices(n, 1) if n * (n - 1) // 2 <= 4 * max_pairs else rng.integers(0, n, (2, 4 * max_pairs))
+    far = np.abs(x[j] - x[i]) >= 0.25 * float(np.ptp(x))
+    i, j = i[far], j[far]
+    if len(i) > max_pairs:
+        pick = rng.choice(len(i), max_pairs, replace=False)
+        i, j = i[pick], j[pick]
+    if not len(i):
+        return line_fit(x, y)
+    slope = (y[j] - y[i]) / (x[j] - x[i])
+    icpt = y[i] - slope * x[i]
+    med = np.median(np.abs(y[ev][None, :] - slope[:, None] * x[ev][None, :] - icpt[:, None]), axis=1)
+    k = int(np.argmin(med))
+    return float(slope[k]), float(icpt[k])
+
+
 def parabola_fit(x, y) -> tuple[float, float, float]:
     """(a2, a1, a0) of the least-squares parabola y = a2·x² + a1·x + a0 (``np.polyfit(x, y, 2)``;
     x should be centred), by the 3x3 normal equations."""
@@ -1619,13 +1646,35 @@ def _span_ends(spans, min_hole_m: float):
     return out
 
 
+def _robust_trend(sp, s, off, z, own):
+    """((slope, offset), lateral tolerance) of the span ``sp``'s plan trend from its wire's points
+    (``own``) on its catenary (``s`` along its line, ``off`` across, heights ``z``), started from
+    their least-median line: a crown's points clumped at one end of a short piece tilt a
+    least-squares trend (and widen its tolerance) enough to hide that the wire's pieces either
+    side of the crown line up. The stored trend where fewer than 3 points."""
+    on = own & (s >= sp.s_from) & (s <= sp.s_to) & \
+        (np.abs(z - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
+    if on.sum() < 3:
+        return (sp.offset_slope, sp.offset), sp.lateral_tol
+    so, oo = s[on], off[on]
+    o1, o0 = median_line_fit(so, oo)
+    for refit in (True, True, False):  # as _span: refitted to the points within 3 robust sigma
+        r = np.abs(oo - o1 * so - o0)
+        tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
+        if refit and (r <= tol).sum() >= 3:
+            o1, o0 = line_fit(so[r <= tol], oo[r <= tol])
+    return (o1, o0), tol
+
+
 def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_gap_m: float = 1.0,
-                sample_m: float = 0.5) -> list:
+                sample_m: float = 0.5, line_of=None, wire_of=None) -> list:
     """The stretches of a wire between two of its fitted pieces along one line that one catenary
     explains: where the wire runs through a crown, the shape test and the Hough lose it, the 3D
     step fits the pieces either side, and ``grow_span_ends`` stops at the foliage. Two spans
     (rms <= ``max_rms``) are one wire across a gap of ``min_gap_m`` to ``max_gap_m`` when their
-    plan trends meet there (within the tighter of their lateral tolerances) and one catenary fits
+    plan trends meet mid-gap (within the tighter of their lateral tolerances: a wire a little
+    askew to its 2D line moves across it over the gap; with each point's ``line_of`` and
+    ``wire_of``, the trends are refitted robustly to each span's own points) and one catenary fits
     both their curves (sampled every ``sample_m``) as closely as their own points fit them (the
     mean of their rms): at a support the two hang in different catenaries and do not. The gap's
     ``free`` points (``p*``: off the ground, metres) on that catenary (within its points' tolerance,
@@ -1636,14 +1685,21 @@ def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float
     taken = ~np.asarray(free, bool).copy()
     for li, line_spans, s, off in _spans_by_line(spans, lines, px, py, max_rms):
         line_spans = sorted(line_spans, key=lambda q: q.s_from)
+        trends = {id(q): ((q.offset_slope, q.offset), q.lateral_tol) if wire_of is None else
+                  _robust_trend(q, s, off, pz, (line_of == li) & (wire_of == q.wire)) for q in line_spans}
         for a in line_spans:
-            oa = a.offset + a.offset_slope * a.s_to
+            (a1, a0), lat_a = trends[id(a)]
+            oa = a0 + a1 * a.s_to
             best = None  # (gap, the next piece, its offset at the gap, the lateral tolerance)
             for b in line_spans:
                 gap = b.s_from - a.s_to
-                ob = b.offset + b.offset_slope * b.s_from
-                lat = min(a.lateral_tol, b.lateral_tol)
-                if min_gap_m <= gap <= max_gap_m and abs(ob - oa) <= lat and (best is None or gap < best[0]):
+                (b1, b0), lat_b = trends[id(b)]
+                ob = b0 + b1 * b.s_from
+                lat = min(lat_a, lat_b)
+                # the trends meet mid-gap: a wire a little askew to the line moves across it over the gap
+                mid = 0.5 * (a.s_to + b.s_from)
+                if min_gap_m <= gap <= max_gap_m and abs(a0 + a1 * mid - b0 - b1 * mid) <= lat and \
+                        (best is None or gap < best[0]):
                     best = (gap, b, ob, lat)
             if best is None:
                 continue

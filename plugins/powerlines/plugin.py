@@ -677,9 +677,9 @@ def _bridge_gaps(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, 
     ground), added by ``_add_found_spans``. Returns what it returns."""
     from .core import bridge_gaps
 
-    low_line, _ = _labels_of_low(low, keep, line_of, wire_of_pt, len(pc))
+    low_line, low_wire = _labels_of_low(low, keep, line_of, wire_of_pt, len(pc))
     found = bridge_gaps(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, low_line < 0,
-                        params["max_rms_3d_m"], max_gap_m=2 * params["s_min_m"])
+                        params["max_rms_3d_m"], max_gap_m=2 * params["s_min_m"], line_of=low_line, wire_of=low_wire)
     return _add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found, hu, vu)
 
 
