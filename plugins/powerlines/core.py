@@ -2119,30 +2119,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
 
     if len(x) == 0 or len(span_ends) == 0:
         return []
-    near = np.zeros(len(x), bool)
-    for (a, b) in lines_xy:
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        d = b - a
-        L2 = float(d @ d) or 1.0
-        t = np.clip(((x - a[0]) * d[0] + (y - a[1]) * d[1]) / L2, 0.0, 1.0)
-        near |= np.hypot(x - a[0] - t * d[0], y - a[1] - t * d[1]) <= reach_m
-    if not near.any():
+    g = _tower_grid(x, y, hag, lines_xy, reach_m, cell_m)
+    if g is None:
         return []
-    x, y, hag = x[near], y[near], hag[near]
-    # cells on multiples of cell_m: the same cells whatever the extent of the input
-    x0, y0 = np.floor(x.min() / cell_m) * cell_m, np.floor(y.min() / cell_m) * cell_m
-    c = np.floor((x - x0) / cell_m).astype(np.int64)
-    r = np.floor((y - y0) / cell_m).astype(np.int64)
-    rows, cols = int(r.max()) + 1, int(c.max()) + 1
-    flat = r * cols + c
-    top = np.full(rows * cols, -np.inf)
-    np.maximum.at(top, flat, hag)
-    layer = np.floor(hag).astype(np.int64)
-    occupied = np.unique(flat * 4096 + np.clip(layer, 0, 4095))  # distinct (cell, 1 m layer)
-    low = (occupied % 4096) >= 3
-    n_layers = np.bincount(occupied[low] // 4096, minlength=rows * cols)
-    centres = np.column_stack([x0 + (np.arange(rows * cols) % cols + 0.5) * cell_m,
-                               y0 + (np.arange(rows * cols) // cols + 0.5) * cell_m])
+    x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols) = g
     has = np.isfinite(top)
     wire_top = np.zeros(rows * cols)
     span_end_hag = np.asarray(span_end_hag, float)
@@ -2159,24 +2139,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
     for k in range(1, n + 1):
         cells = np.flatnonzero(lab == k)
-        if not column[cells].any():
-            continue
-        pc = centres[cells]
-        if np.ptp(pc[:, 0]) + cell_m > max_side_m or np.ptp(pc[:, 1]) + cell_m > max_side_m:
-            continue
-        height = float(top[cells].max())
-        if height < min_slenderness * np.sqrt(len(cells) * cell_m * cell_m):
-            continue
-        mine = np.flatnonzero(np.isin(flat, cells))
-        if len(mine) >= 4:
-            xyz = np.column_stack([x[mine], y[mine], hag[mine]])
-            _, _, rugged, _ = shape_classes(xyz - xyz.min(axis=0))
-            if rugged.mean() > max_rugged:
-                continue
-        body = centres[cells[column[cells]]]
-        centre = np.array([0.5 * (body[:, 0].min() + body[:, 0].max()), 0.5 * (body[:, 1].min() + body[:, 1].max())])
-        arm = 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m  # how far out the wires may hang
-        shaped.append((cells, centre, arm, height))
+        got = _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness,
+                            max_rugged)
+        if got is not None:  # (centre, how far out the wires may hang, height)
+            shaped.append((cells, *got))
     if not shaped:
         return []
     # each span end belongs to the nearest candidate that reaches it (a tree beside a pole does
@@ -2213,6 +2179,139 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         (passed_by if passed else found).append(
             Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                   (x0, y0, cell_m, rows, cols)))
+    return found
+
+
+def _tower_grid(x, y, hag, lines_xy, reach_m: float, cell_m: float):
+    """The points (x, y, hag) within ``reach_m`` of a conductor segment of ``lines_xy`` on a grid
+    of ``cell_m`` cells (on multiples of it: the same cells whatever the extent of the input):
+    (x, y, hag, cell of each, highest hag per cell, number of 1 m layers from 3 m up that hold a
+    point, cell centres, (x0, y0, cell_m, rows, cols)); None where no point is that near."""
+    near = np.zeros(len(x), bool)
+    for (a, b) in lines_xy:
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        d = b - a
+        L2 = float(d @ d) or 1.0
+        t = np.clip(((x - a[0]) * d[0] + (y - a[1]) * d[1]) / L2, 0.0, 1.0)
+        near |= np.hypot(x - a[0] - t * d[0], y - a[1] - t * d[1]) <= reach_m
+    if not near.any():
+        return None
+    x, y, hag = x[near], y[near], hag[near]
+    x0, y0 = np.floor(x.min() / cell_m) * cell_m, np.floor(y.min() / cell_m) * cell_m
+    c = np.floor((x - x0) / cell_m).astype(np.int64)
+    r = np.floor((y - y0) / cell_m).astype(np.int64)
+    rows, cols = int(r.max()) + 1, int(c.max()) + 1
+    flat = r * cols + c
+    top = np.full(rows * cols, -np.inf)
+    np.maximum.at(top, flat, hag)
+    layer = np.floor(hag).astype(np.int64)
+    occupied = np.unique(flat * 4096 + np.clip(layer, 0, 4095))  # distinct (cell, 1 m layer)
+    low = (occupied % 4096) >= 3
+    n_layers = np.bincount(occupied[low] // 4096, minlength=rows * cols)
+    centres = np.column_stack([x0 + (np.arange(rows * cols) % cols + 0.5) * cell_m,
+                               y0 + (np.arange(rows * cols) // cols + 0.5) * cell_m])
+    return x, y, hag, flat, top, n_layers, centres, (x0, y0, cell_m, rows, cols)
+
+
+def _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness, max_rugged):
+    """(centre of the body, arm reach, height) of the tall cells ``cells`` where they are shaped
+    like a tower (see find_pylons: a column, at most ``max_side_m`` across, slender, not a crown's
+    rugged points), else None."""
+    if not column[cells].any():
+        return None
+    pc = centres[cells]
+    if np.ptp(pc[:, 0]) + cell_m > max_side_m or np.ptp(pc[:, 1]) + cell_m > max_side_m:
+        return None
+    height = float(top[cells].max())
+    if height < min_slenderness * np.sqrt(len(cells) * cell_m * cell_m):
+        return None
+    mine = np.flatnonzero(np.isin(flat, cells))
+    if len(mine) >= 4:
+        xyz = np.column_stack([x[mine], y[mine], hag[mine]])
+        _, _, rugged, _ = shape_classes(xyz - xyz.min(axis=0))
+        if rugged.mean() > max_rugged:
+            return None
+    body = centres[cells[column[cells]]]
+    centre = np.array([0.5 * (body[:, 0].min() + body[:, 0].max()), 0.5 * (body[:, 1].min() + body[:, 1].max())])
+    return centre, 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m, height
+
+
+def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, known=(),
+                               cell_m: float = 1.0, reach_m: float = 12.0, top_share: float = 0.8,
+                               column_share: float = 0.5, arm_m: float = 6.0, max_above_m: float = 2.0,
+                               max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
+                               known_m: float = 10.0, under_line_m: float = 2.0,
+                               max_side_ratio: float = 2.0) -> list:
+    """Towers the wires run through without a span ending there, from the towers' own points: a
+    suspension tower where one catenary fits the wire across it (short spans on a slope: the
+    kink at its insulators is within the noise), which ``find_pylons`` cannot see.
+
+    x, y, hag: the off-ground, off-wire points; wire_*: the wire points found (metres, hag =
+    height above ground); line_headings, lines_xy as ``find_pylons``; ``known``: the towers and
+    poles found already (a candidate within ``known_m`` of one is it).
+
+    On ``find_pylons``' grid, a cell is *tall* when its top reaches ``top_share`` of the highest
+    wire within ``arm_m`` of it; the tall cells join into candidates that stand at most
+    ``max_above_m`` over the highest wire near them (a tower's peak holds the earth wire, a pole's
+    top its top wire; the crown of a tall tree beside a low line stands far over it), shaped like
+    a tower (``_tower_shaped``: a column, slender, not rugged). A candidate is a tower when a wire runs
+    through it, not over it: in one of its cells the wire's lowest point is under the cell's top
+    (trees under a line are trimmed below the wires; a tower's arms hold them), and it stands
+    under its lines (``_under_its_lines``). n_spans counts two spans per conductor line passing
+    within ``arm_m`` of its base."""
+    from scipy import ndimage
+
+    if len(x) == 0 or len(wire_x) == 0:
+        return []
+    g = _tower_grid(x, y, hag, lines_xy, reach_m, cell_m)
+    if g is None:
+        return []
+    x, y, hag, flat, top, n_layers, centres, grid = g
+    x0, y0, _, rows, cols = grid
+    has = np.isfinite(top)
+    wc = np.floor((np.asarray(wire_x) - x0) / cell_m).astype(np.int64)
+    wr = np.floor((np.asarray(wire_y) - y0) / cell_m).astype(np.int64)
+    inside = (wc >= 0) & (wc < cols) & (wr >= 0) & (wr < rows)
+    wflat, wh = wr[inside] * cols + wc[inside], np.asarray(wire_hag, float)[inside]
+    wire_low, wire_top = np.full(rows * cols, np.inf), np.full(rows * cols, -np.inf)
+    np.minimum.at(wire_low, wflat, wh)
+    np.maximum.at(wire_top, wflat, wh)
+    k = int(np.ceil(arm_m / cell_m))
+    dy, dx = np.mgrid[-k:k + 1, -k:k + 1]
+    wire_near = ndimage.maximum_filter(wire_top.reshape(rows, cols), footprint=np.hypot(dy, dx) <= k,
+                                       mode="constant", cval=-np.inf).ravel()
+    tall = has & np.isfinite(wire_near) & (top >= top_share * wire_near)
+    through = tall & (wire_low <= top)
+    column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))
+    structure = has & (n_layers >= 3)
+    lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
+    lab = lab.ravel()
+    known_xy = np.array([[p.x, p.y] for p in known], float).reshape(-1, 2)
+    found = []
+    order = np.argsort(lab, kind="stable")
+    bounds = np.searchsorted(lab[order], np.arange(1, n + 2))
+    for i in range(n):
+        cells = order[bounds[i]:bounds[i + 1]]
+        if not through[cells].any():
+            continue
+        if top[cells].max() > wire_near[cells].max() + max_above_m:
+            continue
+        shaped = _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness,
+                               max_rugged)
+        if shaped is None:
+            continue
+        centre, arm, height = shaped
+        if len(known_xy) and np.hypot(*(known_xy - centre).T).min() <= known_m:
+            continue
+        # its arms reach out under the wires below its head (shorter than the tall cells' top)
+        standing = structure & (top >= 0.5 * height)
+        body = _grow_body(cells, standing.reshape(rows, cols), centres, centre, max(arm, arm_m))
+        if not _under_its_lines(centre[0], centre[1], centres[body], lines_xy, known_m, under_line_m,
+                                max_side_ratio, cell_m):
+            continue
+        dist = np.array([_point_segment_distance(centre[0], centre[1], a, b) for a, b in lines_xy])
+        found.append(Pylon(float(centre[0]), float(centre[1]), height, 2 * int(np.sum(dist <= arm_m)),
+                           float(line_headings[int(np.argmin(dist))]), body, grid))
     return found
 
 

@@ -380,7 +380,7 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     import numpy as np
     from shapely.geometry import Point
 
-    from .core import catenary, find_poles, find_pylons, pylon_points
+    from .core import catenary, find_poles, find_pylons, find_towers_passed_through, pylon_points
 
     off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
     ends, end_z, span_lines = [], [], []
@@ -411,6 +411,10 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
         # that took its span ends (a street scan's trees reach the wires' height)
         pxy = np.array([[q.x, q.y] for q in poles])
         found = [t for t in found if np.hypot(*(pxy - [t.x, t.y]).T).min() > POLE_TAKES_M] + poles
+    # suspension towers the wires run through with no span ending there
+    found += find_towers_passed_through(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu,
+                                        hag[wire], headings, lines_xy, known=found,
+                                        top_share=params["pylon_top_share"])
     tower = np.zeros(len(pc), bool)
     # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
     cand = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2))
