@@ -2282,7 +2282,7 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
 
 
 @pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.92, 0.85), ("part3_ak", 0.97, 0.9),
-                                                              ("part2_ai", 0.90, 0.88)])
+                                                              ("part2_ai", 0.90, 0.90)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
     points against the CMU wire labels (class 14). Floors just under what is reached, not the
@@ -2292,7 +2292,8 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
     labels stop; 0.945 / 0.776 before stacks of short wires: a stack's wires counted as clutter
     around each other; tangles and risers at pole tops are missed);
     part3_ak, wires seen for 5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top
-    edge was taken for a wire); part2_ai: 0.905 / 0.894 (0.900 / 0.849 before the wires leading
+    edge was taken for a wire); part2_ai, the issue's 0.90 met: 0.902 / 0.916 (0.905 / 0.894
+    before a wire askew to its line was bridged through a crown; 0.900 / 0.849 before the wires leading
     from the poles found: a wire seen in two pieces 1 and 3 m long, 2.5 m out from its pole;
     0.806 / 0.804 before the next span past
     the last pole and crowded spans: its sparse upper wire past that pole was missed, and a
@@ -2325,6 +2326,20 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
         out = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 15
         labelled_15 = np.asarray(src.classification) == 15
         assert (out & labelled_15).sum() >= 0.6 * out.sum() and (out & labelled_15).sum() >= 0.5 * labelled_15.sum()
+
+
+@pytest.mark.parametrize("rel, crs", [("ahn3_amsterdam/ahn_2386_9702.laz", "EPSG:7415"),
+                                      ("pdal_autzen/autzen_trim.las", None), ("lidR/Topography.laz", None)])
+def test_no_power_line_is_found_on_real_surveys_without_one(rel, crs, tmp_path):
+    """Real surveys with no power line in them (AHN3 Amsterdam: streets, roofs and trees; Autzen:
+    a suburb in US feet; lidR's Topography: forest on a hillside), at the defaults: no conductor,
+    no crossing, no pylon, and no point classified as wire."""
+    path = shared_file(rel)
+    kw = {"crs": crs} if crs else {}
+    toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")}, **kw)
+    for layer in ("conductors", "crossings", "pylons"):
+        assert len(gpd.read_file(tmp_path / "pl.gpkg", layer=layer)) == 0, layer
+    assert not (np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14).any()
 
 
 def test_ahn4_corridor_wire_points_and_lines(tmp_path):
