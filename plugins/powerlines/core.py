@@ -2240,7 +2240,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                                cell_m: float = 1.0, reach_m: float = 12.0, top_share: float = 0.8,
                                column_share: float = 0.5, arm_m: float = 6.0, max_above_m: float = 2.0,
                                max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
-                               known_m: float = 10.0, under_line_m: float = 2.0,
+                               known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
                                max_side_ratio: float = 2.0) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
@@ -2257,8 +2257,9 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     a tower (``_tower_shaped``: a column, slender, not rugged). A candidate is a tower when a wire runs
     through it, not over it: in one of its cells the wire's lowest point is under the cell's top
     (trees under a line are trimmed below the wires; a tower's arms hold them), and it stands
-    under its lines (``_under_its_lines``). n_spans counts two spans per conductor line passing
-    within ``arm_m`` of its base."""
+    under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
+    their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
+    base."""
     from scipy import ndimage
 
     if len(x) == 0 or len(wire_x) == 0:
@@ -2306,7 +2307,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         # its arms reach out under the wires below its head (shorter than the tall cells' top)
         standing = structure & (top >= 0.5 * height)
         body = _grow_body(cells, standing.reshape(rows, cols), centres, centre, max(arm, arm_m))
-        if not _under_its_lines(centre[0], centre[1], centres[body], lines_xy, known_m, under_line_m,
+        if not _under_its_lines(centre[0], centre[1], centres[body], lines_xy, margin_m, under_line_m,
                                 max_side_ratio, cell_m):
             continue
         dist = np.array([_point_segment_distance(centre[0], centre[1], a, b) for a, b in lines_xy])
