@@ -982,6 +982,39 @@ def test_a_pole_ending_its_line_under_another_line_is_a_pylon():
     assert found == [] and len(passed) == 1, [(p.x, p.y, p.n_spans) for p in found]
 
 
+def test_a_crown_reaching_over_a_low_line_where_its_pieces_end_is_no_pylon():
+    """A distribution line 8 m up whose two wires are lost in a crown 20 m tall (their pieces end
+    either side of it, none runs past): judged as if not rugged, the crown is a column under the
+    line where spans end, and only its height against the wires beside it tells it (2.5 times
+    theirs against the 1.5 allowed); the same ends at a 9 m pole make a pylon. Without the wire
+    points the rule has nothing to go by."""
+    from toolbox_plugins.powerlines.core import find_pylons
+
+    rng = np.random.default_rng(11)
+    crown = rng.normal([0.0, 0.0, 13.0], [1.2, 1.2, 3.5], (5000, 3))
+    crown = crown[(crown[:, 2] > 1.0) & (crown[:, 2] < 20.0)]
+    h = rng.uniform(0.3, 9.0, 400)
+    pole = np.column_stack([rng.normal(0, 0.03, 400), rng.normal(0, 0.03, 400), h])
+    ends, span_lines, lines_xy = [], [], []
+    for off in (-0.4, 0.4):
+        for sign in (-1.0, 1.0):
+            a, b = np.array([sign * 1.5, off]), np.array([sign * 60.0, off])
+            ends += [a, b]
+            span_lines.append((a, b))
+        lines_xy.append((np.array([-60.0, off]), np.array([60.0, off])))
+    ends, end_hag = np.array(ends), np.full(len(ends), 8.0)
+    s = np.r_[np.arange(-60.0, -1.5, 0.3), np.arange(1.5, 60.0, 0.3)]
+    wx, wy = np.r_[s, s], np.r_[np.full(len(s), -0.4), np.full(len(s), 0.4)]
+    args = dict(span_lines=span_lines, max_rugged=1.0, wire_xyh=(wx, wy, np.full(len(wx), 8.0)))
+    assert find_pylons(crown[:, 0], crown[:, 1], crown[:, 2], ends, end_hag, [0.0, 0.0], lines_xy, **args) == []
+    assert len(find_pylons(crown[:, 0], crown[:, 1], crown[:, 2], ends, end_hag, [0.0, 0.0], lines_xy,
+                           max_height_share=3.0, **args)) == 1
+    assert len(find_pylons(crown[:, 0], crown[:, 1], crown[:, 2], ends, end_hag, [0.0, 0.0], lines_xy,
+                           **{**args, "wire_xyh": None})) == 1
+    found = find_pylons(pole[:, 0], pole[:, 1], pole[:, 2], ends, end_hag, [0.0, 0.0], lines_xy, **args)
+    assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0
+
+
 def _pole_points(rng, x, y, height_m, radius_m=0.15, per_m=60):
     """A pole's surface as a street scanner sees it: the half facing the road, from 0.3 m up."""
     n = int(height_m * per_m)
@@ -2062,7 +2095,8 @@ def test_towers_the_wires_run_through_keep_their_arms(tmp_path):
 def test_a_suspension_tower_the_wires_run_through_is_found_from_its_own_points():
     """A lattice tower (legs from a 6 m square to 1.5 m at 26 m, arms at 20 m reaching 5.5 m
     across the line, peak at 28 m with the earth wire) that three conductors and the earth wire
-    run through with no span ending there: one tower, at its body's centre. A crown under the
+    run through with no span ending there: one tower, at its body's centre, as high as its peak
+    (a stray point 37 m over it is not its top). A crown under the
     line trimmed 7 m under the wires, and a tall crown beside it reaching over the outer
     conductor (its points through the wire's height), are not towers; nor is the tower again
     where it is known already."""
@@ -2100,7 +2134,8 @@ def test_a_suspension_tower_the_wires_run_through_is_found_from_its_own_points()
     beside = rng.normal([-30.0, 8.0, 17.0], [2.0, 2.0, 3.0], (4000, 3))
     beside = beside[beside[:, 2] > 1.0]
     headings = [0.0] * 4
-    pts = np.vstack([tower, under, beside])
+    stray = np.array([[0.4, 1.6, 65.0]])  # noise over the tower the ground filter left: not its height
+    pts = np.vstack([tower, under, beside, stray])
     found = find_towers_passed_through(pts[:, 0], pts[:, 1], pts[:, 2], w[:, 0], w[:, 1], w[:, 2], headings, lines_xy)
     assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0, [(p.x, p.y) for p in found]
     assert found[0].n_spans == 8 and 27.0 <= found[0].height_m <= 28.5

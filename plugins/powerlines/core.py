@@ -2081,7 +2081,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
                 end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
                 max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
-                under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0):
+                under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0,
+                wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -2104,7 +2105,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     as running past: a pole that ends one line may stand under another line crossing it. Tiles cut spans at their edges,
     where no tower stands: that is what the column is for. A tower is neither vegetation (at most ``max_rugged`` of its points rugged, as
     ``shape_classes`` tells crowns) nor a building (at least ``min_slenderness`` times as tall as
-    the square root of its footprint, arms included). The base is the middle of the column
+    the square root of its footprint, arms included), and, given the wire points found
+    (``wire_xyh``: x, y, hag), it stands at most ``max_height_share`` times as high as the
+    highest of them within ``arm_m`` (a tree reaching over a low line, where the wire's pieces
+    lost in its crown end, stands twice as high or more; a tower holds the earth wire at its
+    peak, a pole its top wire). The base is the middle of the column
     cells (the body; the arms reach out across the line). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell).
@@ -2122,8 +2127,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     g = _tower_grid(x, y, hag, lines_xy, reach_m, cell_m)
     if g is None:
         return []
-    x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols) = g
+    x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols), top_held = g
     has = np.isfinite(top)
+    wire_near = None if wire_xyh is None or not len(wire_xyh[0]) else \
+        _wires_over_cells((x0, y0, cell_m, rows, cols), *wire_xyh, arm_m)[1]
     wire_top = np.zeros(rows * cols)
     span_end_hag = np.asarray(span_end_hag, float)
     ends = cKDTree(np.asarray(span_ends, float))
@@ -2139,8 +2146,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
     for k in range(1, n + 1):
         cells = np.flatnonzero(lab == k)
-        got = _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness,
-                            max_rugged)
+        got = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
+                            min_slenderness, max_rugged)
         if got is not None:  # (centre, how far out the wires may hang, height)
             shaped.append((cells, *got))
     if not shaped:
@@ -2158,6 +2165,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     for k, (cells, (cx, cy), arm, height) in enumerate(shaped):
         n_ends = int(np.sum(owner == k))
         if n_ends < min_ends:
+            continue
+        # a support stands about as high as the wires beside it; a crown reaching over a low
+        # line, where the wire's pieces lost in it end, stands far higher
+        if wire_near is not None and np.isfinite(wire_near[cells].max()) and \
+                height > max_height_share * float(wire_near[cells].max()):
             continue
         passed = False
         if span_lines is not None:
@@ -2186,7 +2198,8 @@ def _tower_grid(x, y, hag, lines_xy, reach_m: float, cell_m: float):
     """The points (x, y, hag) within ``reach_m`` of a conductor segment of ``lines_xy`` on a grid
     of ``cell_m`` cells (on multiples of it: the same cells whatever the extent of the input):
     (x, y, hag, cell of each, highest hag per cell, number of 1 m layers from 3 m up that hold a
-    point, cell centres, (x0, y0, cell_m, rows, cols)); None where no point is that near."""
+    point, cell centres, (x0, y0, cell_m, rows, cols), highest hag per cell of a point with
+    another within 5 m under it); None where no point is that near."""
     near = np.zeros(len(x), bool)
     for (a, b) in lines_xy:
         a, b = np.asarray(a, float), np.asarray(b, float)
@@ -2210,19 +2223,49 @@ def _tower_grid(x, y, hag, lines_xy, reach_m: float, cell_m: float):
     n_layers = np.bincount(occupied[low] // 4096, minlength=rows * cols)
     centres = np.column_stack([x0 + (np.arange(rows * cols) % cols + 0.5) * cell_m,
                                y0 + (np.arange(rows * cols) // cols + 0.5) * cell_m])
-    return x, y, hag, flat, top, n_layers, centres, (x0, y0, cell_m, rows, cols)
+    # the highest point of each cell with another within 5 m under it: a structure's top (a far
+    # pole's few points lie 2-3 m apart), not a stray point over it (a bird, noise the ground
+    # filter left)
+    order = np.lexsort((hag, flat))
+    f, h = flat[order], hag[order]
+    held = np.r_[False, (f[1:] == f[:-1]) & (np.diff(h) <= 5.0)]
+    top_held = np.full(rows * cols, -np.inf)
+    np.maximum.at(top_held, f[held], h[held])
+    return x, y, hag, flat, top, n_layers, centres, (x0, y0, cell_m, rows, cols), top_held
 
 
-def _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness, max_rugged):
-    """(centre of the body, arm reach, height) of the tall cells ``cells`` where they are shaped
-    like a tower (see find_pylons: a column, at most ``max_side_m`` across, slender, not a crown's
-    rugged points), else None."""
+def _wires_over_cells(grid, wire_x, wire_y, wire_hag, arm_m: float):
+    """Per cell of ``grid`` (``_tower_grid``'s): the lowest height of the wire points in it (inf
+    where none) and the highest within ``arm_m`` of it (-inf where none)."""
+    from scipy import ndimage
+
+    x0, y0, cell_m, rows, cols = grid
+    wc = np.floor((np.asarray(wire_x) - x0) / cell_m).astype(np.int64)
+    wr = np.floor((np.asarray(wire_y) - y0) / cell_m).astype(np.int64)
+    inside = (wc >= 0) & (wc < cols) & (wr >= 0) & (wr < rows)
+    wflat, wh = wr[inside] * cols + wc[inside], np.asarray(wire_hag, float)[inside]
+    wire_low, wire_top = np.full(rows * cols, np.inf), np.full(rows * cols, -np.inf)
+    np.minimum.at(wire_low, wflat, wh)
+    np.maximum.at(wire_top, wflat, wh)
+    k = int(np.ceil(arm_m / cell_m))
+    dy, dx = np.mgrid[-k:k + 1, -k:k + 1]
+    wire_near = ndimage.maximum_filter(wire_top.reshape(rows, cols), footprint=np.hypot(dy, dx) <= k,
+                                       mode="constant", cval=-np.inf).ravel()
+    return wire_low, wire_near
+
+
+def _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m, min_slenderness,
+                  max_rugged):
+    """(centre of the body, arm reach, height: ``top_held``'s highest) of the tall cells
+    ``cells`` where they are shaped like a tower (see find_pylons: a column, at most
+    ``max_side_m`` across, slender, not a crown's rugged points), else None."""
     if not column[cells].any():
         return None
     pc = centres[cells]
     if np.ptp(pc[:, 0]) + cell_m > max_side_m or np.ptp(pc[:, 1]) + cell_m > max_side_m:
         return None
-    height = float(top[cells].max())
+    held = top_held[cells]
+    height = float(held.max()) if np.isfinite(held).any() else float(top[cells].max())
     if height < min_slenderness * np.sqrt(len(cells) * cell_m * cell_m):
         return None
     mine = np.flatnonzero(np.isin(flat, cells))
@@ -2267,20 +2310,10 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     g = _tower_grid(x, y, hag, lines_xy, reach_m, cell_m)
     if g is None:
         return []
-    x, y, hag, flat, top, n_layers, centres, grid = g
+    x, y, hag, flat, top, n_layers, centres, grid, top_held = g
     x0, y0, _, rows, cols = grid
     has = np.isfinite(top)
-    wc = np.floor((np.asarray(wire_x) - x0) / cell_m).astype(np.int64)
-    wr = np.floor((np.asarray(wire_y) - y0) / cell_m).astype(np.int64)
-    inside = (wc >= 0) & (wc < cols) & (wr >= 0) & (wr < rows)
-    wflat, wh = wr[inside] * cols + wc[inside], np.asarray(wire_hag, float)[inside]
-    wire_low, wire_top = np.full(rows * cols, np.inf), np.full(rows * cols, -np.inf)
-    np.minimum.at(wire_low, wflat, wh)
-    np.maximum.at(wire_top, wflat, wh)
-    k = int(np.ceil(arm_m / cell_m))
-    dy, dx = np.mgrid[-k:k + 1, -k:k + 1]
-    wire_near = ndimage.maximum_filter(wire_top.reshape(rows, cols), footprint=np.hypot(dy, dx) <= k,
-                                       mode="constant", cval=-np.inf).ravel()
+    wire_low, wire_near = _wires_over_cells(grid, wire_x, wire_y, wire_hag, arm_m)
     tall = has & np.isfinite(wire_near) & (top >= top_share * wire_near)
     through = tall & (wire_low <= top)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))
@@ -2295,13 +2328,13 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         cells = order[bounds[i]:bounds[i + 1]]
         if not through[cells].any():
             continue
-        if top[cells].max() > wire_near[cells].max() + max_above_m:
-            continue
-        shaped = _tower_shaped(cells, x, y, hag, flat, top, column, centres, cell_m, max_side_m, min_slenderness,
-                               max_rugged)
+        shaped = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
+                               min_slenderness, max_rugged)
         if shaped is None:
             continue
         centre, arm, height = shaped
+        if height > wire_near[cells].max() + max_above_m:
+            continue
         if len(known_xy) and np.hypot(*(known_xy - centre).T).min() <= known_m:
             continue
         # its arms reach out under the wires below its head (shorter than the tall cells' top)

@@ -399,10 +399,11 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     ground_z = dtm.sample(ends[:, 0] / hu, ends[:, 1] / hu) * vu if len(ends) else np.zeros(0)
     lines_xy = [(np.array(g.coords[0]) * hu, np.array(g.coords[-1]) * hu) for g in cond.geometry]
     headings = [float(np.degrees(np.arctan2(b[1] - a[1], b[0] - a[0])) % 180.0) for a, b in lines_xy]
-    found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
-                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by)
-    found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
     wire = conductor_of >= 0
+    found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
+                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by,
+                        wire_xyh=(pc.x[wire] * hu, pc.y[wire] * hu, hag[wire]))
+    found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
     poles = find_poles(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu, hag[wire],
                        headings, lines_xy, span_ends=ends, span_end_hag=np.asarray(end_z) - ground_z,
                        top_share=params["pylon_top_share"])
