@@ -711,14 +711,20 @@ def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
         dz = z - catenary(s, z0, s0, c)
         on = np.abs(dz) <= max(3 * rms, 0.15)
         if on.sum() >= 3:
-            o1, o0 = line_fit(s[on], off[on])
-            for refit in (True, True, False):  # the trend refitted to the points within 3 robust sigma of it
-                r = np.abs(off[on] - o1 * s[on] - o0)
-                lateral_tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
-                within = np.flatnonzero(on)[r <= lateral_tol]
-                if refit and len(within) >= 3:
-                    o1, o0 = line_fit(s[within], off[within])
+            o1, o0, lateral_tol = _refined_trend(s[on], off[on], *line_fit(s[on], off[on]))
     return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms, lateral_tol)
+
+
+def _refined_trend(s, off, o1: float, o0: float) -> tuple[float, float, float]:
+    """(slope, offset, lateral tolerance) of a wire's plan trend ``off = o1·s + o0`` refitted
+    twice to the points within 3 robust sigma of it (the tolerance, at least
+    WIRE_LATERAL_FLOOR_M): crown points linked to the wire neither pull it nor widen it."""
+    for refit in (True, True, False):
+        r = np.abs(off - o1 * s - o0)
+        tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
+        if refit and (r <= tol).sum() >= 3:
+            o1, o0 = line_fit(s[r <= tol], off[r <= tol])
+    return o1, o0, tol
 
 
 def span_in_frame(sp: Span, line_from, line_to, conductor: int, wire: int) -> Span:
@@ -1656,13 +1662,7 @@ def _robust_trend(sp, s, off, z, own):
         (np.abs(z - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
     if on.sum() < 3:
         return (sp.offset_slope, sp.offset), sp.lateral_tol
-    so, oo = s[on], off[on]
-    o1, o0 = median_line_fit(so, oo)
-    for refit in (True, True, False):  # as _span: refitted to the points within 3 robust sigma
-        r = np.abs(oo - o1 * so - o0)
-        tol = max(3 * 1.4826 * float(np.median(r)), WIRE_LATERAL_FLOOR_M)
-        if refit and (r <= tol).sum() >= 3:
-            o1, o0 = line_fit(so[r <= tol], oo[r <= tol])
+    o1, o0, tol = _refined_trend(s[on], off[on], *median_line_fit(s[on], off[on]))
     return (o1, o0), tol
 
 

@@ -400,21 +400,21 @@ def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, pa
     lines_xy = [(np.array(g.coords[0]) * hu, np.array(g.coords[-1]) * hu) for g in cond.geometry]
     headings = [float(np.degrees(np.arctan2(b[1] - a[1], b[0] - a[0])) % 180.0) for a, b in lines_xy]
     wire = conductor_of >= 0
-    found = find_pylons(pc.x[off] * hu, pc.y[off] * hu, hag[off], ends, np.asarray(end_z) - ground_z, headings,
-                        lines_xy, top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by,
-                        wire_xyh=(pc.x[wire] * hu, pc.y[wire] * hu, hag[wire]))
+    off_xyh = (pc.x[off] * hu, pc.y[off] * hu, hag[off])
+    wire_xyh = (pc.x[wire] * hu, pc.y[wire] * hu, hag[wire])
+    found = find_pylons(*off_xyh, ends, np.asarray(end_z) - ground_z, headings, lines_xy,
+                        top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by,
+                        wire_xyh=wire_xyh)
     found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
-    poles = find_poles(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu, hag[wire],
-                       headings, lines_xy, span_ends=ends, span_end_hag=np.asarray(end_z) - ground_z,
-                       top_share=params["pylon_top_share"])
+    poles = find_poles(*off_xyh, *wire_xyh, headings, lines_xy, span_ends=ends,
+                       span_end_hag=np.asarray(end_z) - ground_z, top_share=params["pylon_top_share"])
     if poles:
         # where a pole carries the wires, a tower found beside it is the crown next to the pole
         # that took its span ends (a street scan's trees reach the wires' height)
         pxy = np.array([[q.x, q.y] for q in poles])
         found = [t for t in found if np.hypot(*(pxy - [t.x, t.y]).T).min() > POLE_TAKES_M] + poles
     # suspension towers the wires run through with no span ending there
-    found += find_towers_passed_through(pc.x[off] * hu, pc.y[off] * hu, hag[off], pc.x[wire] * hu, pc.y[wire] * hu,
-                                        hag[wire], headings, lines_xy, known=found,
+    found += find_towers_passed_through(*off_xyh, *wire_xyh, headings, lines_xy, known=found,
                                         top_share=params["pylon_top_share"])
     tower = np.zeros(len(pc), bool)
     # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
