@@ -1107,6 +1107,57 @@ def test_peel_finds_a_sparse_wire_over_a_crown():
     assert rms <= 0.05
 
 
+def _earth_wire_scene(rng, facade=False):
+    """A phase along x (3 points per metre, sag 7 m over 290 m) and, 7 m over it, an earth wire
+    the survey hit in stretches up to 26 m apart, about 0.6 points per metre in them, swinging
+    0.5 m across the line (AHN4 12AN2_20's); with ``facade``, instead of the wire, five scan
+    rows 0.25 m one over another in stretches of 6 m, 15 m apart. Returns the 3D step's result
+    with V_max 3.2 m (12AN2_20's) and how many of the points are the phase's."""
+    s_p = np.sort(rng.uniform(0, 290, 870))
+    phase = np.column_stack([s_p, rng.normal(0, 0.03, len(s_p)), catenary(s_p, 29.0, 145.0, 1500.0)])
+    if facade:
+        rows = []
+        for lo in np.arange(0.0, 290.0, 21.0):
+            for k in range(5):
+                s_r = np.sort(rng.uniform(lo, lo + 6.0, 30))
+                rows.append(np.column_stack([s_r, 0.3 + rng.normal(0, 0.03, len(s_r)),
+                                             34.0 + 0.25 * k + rng.normal(0, 0.02, len(s_r))]))
+        other = np.concatenate(rows)
+    else:
+        stretches = [(0, 24), (50, 60), (77, 89), (105, 130), (147, 186), (207, 215), (250, 260), (273, 284)]
+        s_e = np.sort(np.concatenate([rng.uniform(a, b, int(0.6 * (b - a)) + 1) for a, b in stretches]))
+        other = np.column_stack([s_e, -0.5 + 0.5 * ((s_e - 145.0) / 145.0) ** 2 + rng.normal(0, 0.04, len(s_e)),
+                                 catenary(s_e, 36.0, 145.0, 1500.0) + rng.normal(0, 0.03, len(s_e))])
+    xyz = np.r_[phase, other]
+    lines = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 290.0)]
+    return conductors_3d(lines, xyz[:, 0], xyz[:, 1], xyz[:, 2], band=1.0, z_link=1.0, s_link=6.42, min_span=8.0,
+                         max_rms=0.2), len(phase)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_sparse_earth_wire_seen_in_stretches_far_apart_is_one_wire(seed):
+    """The earth wire's stretches lie further apart than the 3D step links (and than its search
+    across occlusions bridges): one wire with all its points, none of the phase's (before: its
+    one stretch of 20 points a wire, the rest nothing)."""
+    (spans, line_of, wire_of), n_phase = _earth_wire_scene(np.random.default_rng(seed))
+    earth = np.arange(len(wire_of)) >= n_phase
+    assert np.mean(wire_of[~earth] >= 0) >= 0.99
+    assert np.mean(wire_of[earth] >= 0) >= 0.95
+    assert len(np.unique(wire_of[earth & (wire_of >= 0)])) == 1
+    assert not np.isin(wire_of[~earth], wire_of[earth & (wire_of >= 0)]).any()
+    (sp,) = [sp for sp in spans if sp.wire == wire_of[earth][0]]
+    assert sp.rms <= 0.05 and sp.c == pytest.approx(1500.0, rel=0.1)
+
+
+def test_scan_rows_in_stretches_far_apart_are_no_sparse_wire():
+    """A facade's scan rows seen in stretches as far apart as the earth wire's lie on a level
+    curve too, but each has the next rows around it: no wire takes them (the phase is found)."""
+    (spans, line_of, wire_of), n_phase = _earth_wire_scene(np.random.default_rng(0), facade=True)
+    rows = np.arange(len(wire_of)) >= n_phase
+    assert np.mean(wire_of[~rows] >= 0) >= 0.99
+    assert np.mean(wire_of[rows] >= 0) <= 0.05
+
+
 def _sibling_scene(rng, stub=False):
     """A fitted 60 m span along x (sag 0.75 m) and beside it, 1.2 m across and 0.3 m up, a
     sparse phase of the same line (clumps of 3 points every 2-6 m; with ``stub``, 15 points
@@ -2287,12 +2338,13 @@ def _ahn4_real(name, tmp_path):
     return tmp_path / f"{name}.laz", sub
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.99), ("12AN2_20", 0.98, 0.955)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.99), ("12AN2_20", 0.98, 0.975)])
 def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (measured
-    0.994 / 0.995 and 0.980 / 0.961; 12AN2_20's sparse earth wires on top are the misses left: see
-    the issue notes; the producer counts the wire across a tower's footprint as tower, and so do
-    we: P 0.978 while spans grew across it), V_max chosen from the wires' point spacing (about
+    0.994 / 0.995 and 0.986 / 0.981; 12AN2_20: 0.986 / 0.968 while its sparse earth wires, seen
+    in stretches up to 26 m apart, were found in pieces; the producer counts the wire across a
+    tower's footprint as tower, and so do we: P 0.978 while spans grew across it), V_max chosen
+    from the wires' point spacing (about
     0.33 m on both: 3.2-3.3 m), and the tile's one tower
     (the producer's class 15) found within 2 m, nothing else taken for one."""
     path, sub = _ahn4_real(name, tmp_path)

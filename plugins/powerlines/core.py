@@ -266,6 +266,11 @@ SIDE_BY_SIDE_MIN_GAP_M = 0.25
 # the least rms about its catenary that a wire's span may have, whatever the fit of the span it
 # continues (ALS and mobile scans fit 0.02-0.05 m)
 WIRE_HEIGHT_RMS_M = 0.08
+# a sparse wire's visible stretches may lie this many of the 3D step's links apart (AHN4's
+# earth wires: hit in stretches of 10-40 m, up to 26 m apart, where links are 6.4 m)
+WIDE_GAP_LINKS = 5.0
+# the radius within which a sparse wire has no other point of its band (its own points aside)
+ISOLATION_M = 0.5
 # how many of a set's best-supported lines (through distinct points) straight_wires tries before
 # it leaves the set: a cross arm or a pole top's several angles come before a wire beside them
 N_BEST_LINES = 5
@@ -670,8 +675,71 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                 line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
                 next_wire += 1
                 good.append(spans[-1])
+        free = np.flatnonzero(line_of[cand] < 0)
+        if good and peel and len(free) >= min_points:
+            # a thin wire (an earth wire over the phases) that the survey hit in stretches several
+            # V_max apart: searched across wider gaps, kept where nothing else of the band lies
+            # around its points (a facade's scan rows, a crown's edge have their neighbours there)
+            for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
+                                             gap_m=WIDE_GAP_LINKS * s_link):
+                sel = free[part]
+                # (one without such a gap is what the search above turned down)
+                if np.diff(np.sort(s[sel])).max() <= 2 * s_link or \
+                        not _stands_clear(np.column_stack([s, off, z]), sel, ISOLATION_M):
+                    continue
+                sel, fit, gone = _whole_sparse_wire(sel, fit, s, off, z, line_of[cand] >= 0, wire_of_point[cand],
+                                                    max_rms)
+                if gone:  # stretches of it dense enough to have been fitted alone
+                    spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
+                    good = [sp for sp in good if sp.wire not in gone]
+                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
+                line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
+                next_wire += 1
+                good.append(spans[-1])
         _pick_up(li, good, cand, s, z, off, line_of, wire_of_point)
     return spans, line_of, wire_of_point
+
+
+def _whole_sparse_wire(run, fit, s, off, z, wired, wire_of, max_rms: float, max_slope: float = 0.5,
+                       share: float = 0.9):
+    """A sparse wire found from its longest run (indices ``run`` into a line's band, ``fit`` its
+    catenary) with the rest of its points past gaps wider still: the band's points on that
+    catenary where it hangs gently (slope at most ``max_slope``) that are on no wire (``wired``)
+    and have nothing around them off it (see _stands_clear), and the wires (``wire_of``) with
+    ``share`` of their points on it. Returns (indices, refitted catenary, those wires); the run
+    alone where the whole fits worse than ``max_rms``."""
+    tol = max(3 * fit[3], 0.15)
+    gentle = np.abs(np.sinh((s - fit[1]) / fit[2])) <= max_slope
+    on = gentle & (np.abs(catenary(s, *fit[:3]) - z) <= tol)
+    gone = [int(w) for w in np.unique(wire_of[on & wired]) if w >= 0 and
+            np.mean(on[wire_of == w]) >= share]
+    take = on & (~wired | np.isin(wire_of, gone))
+    xyz = np.column_stack([s, off, z])
+    rest = np.flatnonzero(~take)
+    if len(rest):  # (a point with clutter around it is the clutter's)
+        around = cKDTree(xyz[rest]).query_ball_point(xyz[take], ISOLATION_M, return_length=True)
+        keep = np.flatnonzero(take)[around == 0]
+        take[:] = False
+        take[keep] = True
+    # a wire joins whole or not at all
+    gone = [w for w in gone if np.all(take[wire_of == w])]
+    take &= ~wired | np.isin(wire_of, gone)
+    take[run] = True
+    whole = np.flatnonzero(take)
+    whole_fit = fit_catenary(s[whole], z[whole])
+    if whole_fit[3] > max_rms:
+        return run, fit, []
+    return whole, whole_fit, gone
+
+
+def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
+    """Whether the points ``run`` (indices into ``xyz``) have on average at most ``max_around``
+    other points of ``xyz`` within ``radius_m`` each."""
+    others = np.setdiff1d(np.arange(len(xyz)), run)
+    if not len(others):
+        return True
+    around = cKDTree(xyz[others]).query_ball_point(xyz[run], radius_m, return_length=True)
+    return float(np.mean(around)) <= max_around
 
 
 def band_owner(lines, px, py, band: float, reach: float) -> np.ndarray:
