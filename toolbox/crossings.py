@@ -34,7 +34,9 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
     end of a line's segments, where that end is within a support's reach, and within
     STRAIN_INSULATOR_M of that support or past it, is not a crossing: the line ends at the support
     (the method's crossings are not pylon positions), and the extension would carry it on to the
-    line beside the pole; nor is one of two lines that both end at a support, within its reach.
+    line beside the pole; where that end lies within STRAIN_INSULATOR_M of the support along the
+    line, nothing more than STRAIN_INSULATOR_M past the support is; nor is one of two lines that
+    both end at a support, within its reach.
     Returns a list of dicts (x, y, n_lines, angle_deg, lines).
     """
     sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
@@ -49,8 +51,13 @@ def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, 
         lim, ends_at = [], set()
         for t_end, side in ((t.min(), -1.0), (t.max(), 1.0)):
             near = np.flatnonzero(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach) if len(segs) else []
-            lim.append(None if not len(near) else side * max(
-                side * t_end + beyond_m, float(np.max(side * ((sup[near] - a) @ d))) - STRAIN_INSULATOR_M))
+            if len(near):
+                at = float(np.max(side * ((sup[near] - a) @ d)))  # the farthest support, along the line
+                reach = max(side * t_end + beyond_m, at - STRAIN_INSULATOR_M)
+                if abs(side * t_end - at) <= STRAIN_INSULATOR_M:
+                    # its wire seen up to the support: it ends there, not a metre past it
+                    reach = max(side * t_end, at + STRAIN_INSULATOR_M)
+            lim.append(None if not len(near) else side * reach)
             ends_at.update(int(k) for k in near)
         extents.append((a, d, lim, ends_at))
 
