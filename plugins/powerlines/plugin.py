@@ -14,6 +14,9 @@ V_MAX_METHOD_M = 2.5
 GAP_SPACINGS = 10.0
 # a tower found this close to a pole is the pole's (its span ends and a crown beside it)
 POLE_TAKES_M = 6.0
+# how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
+# grid); a lattice tower's reaches 4-8 m
+POLE_FOOTPRINT_M = 3.0
 
 REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
@@ -244,12 +247,13 @@ def _run(inputs, params, ctx):
                                               vu, dtm, params, also=found)
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
-        # on AHN4: the wire between the arms is class 15)
+        # on AHN4: the wire between the arms is class 15); one grown up to a pole stays wire
         from .core import pylon_points
 
         on_tower = np.zeros(len(grown), bool)
         for p in found:
-            on_tower |= pylon_points(p, pc.x[grown] * hu, pc.y[grown] * hu)
+            if p.extent_m() > POLE_FOOTPRINT_M:
+                on_tower |= pylon_points(p, pc.x[grown] * hu, pc.y[grown] * hu)
         gone = grown[on_tower & (conductor_of[grown] >= 0)]
         conductor_of[gone] = -1
         tower_pt[gone] = True
