@@ -2378,7 +2378,9 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     tx, ty = np.asarray(sub.x)[tower], np.asarray(sub.y)[tower]
     py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
     assert len(py) == 1
-    assert np.hypot(py.geometry.x[0] - 0.5 * (tx.min() + tx.max()), py.geometry.y[0] - 0.5 * (ty.min() + ty.max())) <= 2.0
+    # (the issue asks 2 m; measured 0.05 and 0.25 m, 0.75 and 1.0 m while a tower's base was the
+    # middle of its column cells)
+    assert np.hypot(py.geometry.x[0] - 0.5 * (tx.min() + tx.max()), py.geometry.y[0] - 0.5 * (ty.min() + ty.max())) <= 0.5
     t15 = out == 15
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 

@@ -2256,8 +2256,12 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
                                                max_side_ratio, cell_m):
             continue
+        # its base where its points are: the middle of its column cells leans to the side a street
+        # scan sees, and to an arm's cells on an angle tower
+        mine = np.flatnonzero(np.isin(flat, cells))
+        bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
         (passed_by if passed else found).append(
-            Pylon(float(cx), float(cy), height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
+            Pylon(bx, by, height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                   (x0, y0, cell_m, rows, cols)))
     return found
 
