@@ -663,35 +663,29 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                         continue
                 emit(np.flatnonzero(sel), wire, fit)
         good = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
-        free = np.flatnonzero(line_of[cand] < 0)
-        if good and peel and len(free) >= min_points:
-            # a line that holds a wire: what its pieces left (the sparse stretches of a mobile
-            # scan, a wire linked to clutter under it) searched for catenaries as a whole, across
-            # gaps twice the link's (occlusions)
+        # a line that holds a wire: what its pieces left (the sparse stretches of a mobile scan, a
+        # wire linked to clutter under it) searched for catenaries as a whole, across gaps twice the
+        # link's (occlusions); then across WIDE_GAP_LINKS for a thin wire (an earth wire over the
+        # phases) that the survey hit in stretches several V_max apart, kept where nothing else of
+        # the band lies around its points (a facade's scan rows, a crown's edge have their
+        # neighbours there)
+        for gap_m, wide in ((2 * s_link, False), (WIDE_GAP_LINKS * s_link, True)):
+            free = np.flatnonzero(line_of[cand] < 0)
+            if not (good and peel and len(free) >= min_points):
+                continue
+            xyz = np.column_stack([s, off, z]) if wide else None
             for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
-                                             gap_m=2 * s_link):
+                                             gap_m=gap_m):
                 sel = free[part]
-                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
-                line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
-                next_wire += 1
-                good.append(spans[-1])
-        free = np.flatnonzero(line_of[cand] < 0)
-        if good and peel and len(free) >= min_points:
-            # a thin wire (an earth wire over the phases) that the survey hit in stretches several
-            # V_max apart: searched across wider gaps, kept where nothing else of the band lies
-            # around its points (a facade's scan rows, a crown's edge have their neighbours there)
-            for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
-                                             gap_m=WIDE_GAP_LINKS * s_link):
-                sel = free[part]
-                # (one without such a gap is what the search above turned down)
-                if np.diff(np.sort(s[sel])).max() <= 2 * s_link or \
-                        not _stands_clear(np.column_stack([s, off, z]), sel, ISOLATION_M):
-                    continue
-                sel, fit, gone = _whole_sparse_wire(sel, fit, s, off, z, line_of[cand] >= 0, wire_of_point[cand],
-                                                    max_rms)
-                if gone:  # stretches of it dense enough to have been fitted alone
-                    spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
-                    good = [sp for sp in good if sp.wire not in gone]
+                if wide:
+                    # (one without a gap over the first search's is what that search turned down)
+                    if np.diff(np.sort(s[sel])).max() <= 2 * s_link or not _stands_clear(xyz, sel, ISOLATION_M):
+                        continue
+                    sel, fit, gone = _whole_sparse_wire(sel, fit, xyz, line_of[cand] >= 0, wire_of_point[cand],
+                                                        max_rms, ISOLATION_M)
+                    if gone:  # stretches of it dense enough to have been fitted alone
+                        spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
+                        good = [sp for sp in good if sp.wire not in gone]
                 spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
                 line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
                 next_wire += 1
@@ -700,29 +694,24 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     return spans, line_of, wire_of_point
 
 
-def _whole_sparse_wire(run, fit, s, off, z, wired, wire_of, max_rms: float, max_slope: float = 0.5,
+def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: float, max_slope: float = 0.5,
                        share: float = 0.9):
-    """A sparse wire found from its longest run (indices ``run`` into a line's band, ``fit`` its
-    catenary) with the rest of its points past gaps wider still: the band's points on that
-    catenary where it hangs gently (slope at most ``max_slope``) that are on no wire (``wired``)
-    and have nothing around them off it (see _stands_clear), and the wires (``wire_of``) with
-    ``share`` of their points on it. Returns (indices, refitted catenary, those wires); the run
-    alone where the whole fits worse than ``max_rms``."""
-    tol = max(3 * fit[3], 0.15)
+    """A sparse wire found from its longest run (indices ``run`` into a line's band ``xyz``:
+    along, across, height; ``fit`` its catenary) with the rest of its points past gaps wider
+    still: the band's points on that catenary where it hangs gently (slope at most
+    ``max_slope``) that are on no wire (``wired``) and have no point off it within ``radius_m``,
+    and the wires (``wire_of``) with ``share`` of their points on it, whole. Returns (indices,
+    refitted catenary, those wires); the run alone where the whole fits worse than ``max_rms``."""
+    s, z = xyz[:, 0], xyz[:, 2]
     gentle = np.abs(np.sinh((s - fit[1]) / fit[2])) <= max_slope
-    on = gentle & (np.abs(catenary(s, *fit[:3]) - z) <= tol)
-    gone = [int(w) for w in np.unique(wire_of[on & wired]) if w >= 0 and
-            np.mean(on[wire_of == w]) >= share]
+    on = gentle & (np.abs(catenary(s, *fit[:3]) - z) <= max(3 * fit[3], 0.15))
+    gone = [int(w) for w in np.unique(wire_of[on & wired]) if w >= 0 and np.mean(on[wire_of == w]) >= share]
     take = on & (~wired | np.isin(wire_of, gone))
-    xyz = np.column_stack([s, off, z])
     rest = np.flatnonzero(~take)
     if len(rest):  # (a point with clutter around it is the clutter's)
-        around = cKDTree(xyz[rest]).query_ball_point(xyz[take], ISOLATION_M, return_length=True)
-        keep = np.flatnonzero(take)[around == 0]
-        take[:] = False
-        take[keep] = True
-    # a wire joins whole or not at all
-    gone = [w for w in gone if np.all(take[wire_of == w])]
+        crowded = cKDTree(xyz[rest]).query_ball_point(xyz[take], radius_m, return_length=True) > 0
+        take[np.flatnonzero(take)[crowded]] = False
+    gone = [w for w in gone if np.all(take[wire_of == w])]  # a wire joins whole or not at all
     take &= ~wired | np.isin(wire_of, gone)
     take[run] = True
     whole = np.flatnonzero(take)
@@ -2177,8 +2166,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     (``wire_xyh``: x, y, hag), it stands at most ``max_height_share`` times as high as the
     highest of them within ``arm_m`` (a tree reaching over a low line, where the wire's pieces
     lost in its crown end, stands twice as high or more; a tower holds the earth wire at its
-    peak, a pole its top wire). The base is the middle of the column
-    cells (the body; the arms reach out across the line). ``passed_by``, a list, gets the
+    peak, a pole its top wire). The base is the median of its points (the middle of its column
+    cells leans to the side a street scan sees). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell).
 
