@@ -731,6 +731,47 @@ def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
     return float(np.mean(around)) <= max_around
 
 
+def twin_lines(spans, lines, max_rms: float, min_span_m: float, band_m: float,
+               across_m: float = 0.5 * SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5) -> list[tuple[int, int]]:
+    """Pairs of lines (i < j; ``lines``: [(anchor, direction, t_from, t_to)]) whose bands share a
+    wire: the Hough can draw a ribbon's lines between its phases, a few tenths of a metre either
+    side of the middle one, and each band then holds the points on its side of that wire (two
+    conductors along it, each leaning with the boundary between the bands). Lines nearly parallel
+    and within two bands (``band_m``) of each other are compared: they are twins where a span of
+    each (fitting, ``min_span_m`` long, thin across) overlaps the other's by ``min_span_m`` on the
+    same plan trend (within ``across_m``) and the same catenary (within their fit tolerance) at
+    both ends and the middle of the overlap."""
+    good = {}
+    for sp in spans:
+        if sp.rms <= max_rms and sp.s_to - sp.s_from >= min_span_m and sp.offset_rms <= WIRE_LATERAL_RMS_M:
+            good.setdefault(sp.conductor, []).append(sp)
+    cos_min = np.cos(np.radians(max_angle_deg))
+    pairs = []
+    keys = sorted(good)
+    for x, i in enumerate(keys):
+        ai, di, _, _ = lines[i]
+        ni = np.array([-di[1], di[0]])
+        for j in keys[x + 1:]:
+            aj, dj, tj0, tj1 = lines[j]
+            if abs(float(di @ dj)) < cos_min or \
+                    min(abs(float((aj + t * dj - ai) @ ni)) for t in (tj0, tj1)) > 2 * band_m:
+                continue
+            if any(_same_wire(p, span_in_frame(q, lines[j], lines[i], i, q.wire), min_span_m, across_m)
+                   for p in good[i] for q in good[j]):
+                pairs.append((i, j))
+    return pairs
+
+
+def _same_wire(p: Span, q: Span, min_overlap_m: float, across_m: float) -> bool:
+    lo, hi = max(p.s_from, q.s_from), min(p.s_to, q.s_to)
+    if hi - lo < min_overlap_m:
+        return False
+    s = np.array([lo, 0.5 * (lo + hi), hi])
+    across = np.abs((p.offset + p.offset_slope * s) - (q.offset + q.offset_slope * s))
+    height = np.abs(catenary(s, p.z0, p.s0, p.c) - catenary(s, q.z0, q.s0, q.c))
+    return bool((across <= across_m).all() and (height <= max(3 * max(p.rms, q.rms), 0.15)).all())
+
+
 def band_owner(lines, px, py, band: float, reach: float) -> np.ndarray:
     """Per point, the 2D line whose band holds it (-1: none): the nearest line that reaches it,
     ``reach`` past the ends of its extent, if within ``band`` of it (bands of neighbouring lines
@@ -1938,7 +1979,26 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
     clearly bimodal (two-means, centres >= ``min_gap`` apart and >= 4 pooled standard
     deviations, the pooled spread no wider than a wire's, ``max_sd``: layers of a crown are
     wider); of the two directions the clearer split, repeated ``depth`` times (a square bundle
-    needs two)."""
+    needs two). Where no such cut exists, the residual across the line about the wires' own
+    trend (``_across_wires``), then a cut into one group per wire (a ribbon of 3-4 wires), about
+    the straight trend and then about the wires' own."""
+    def halves(r):
+        split = _two_means_1d(r, min_points)
+        return None if split is None else split[0].astype(np.int64)
+
+    def clean_halves(r):
+        split = _two_means_1d(r, min_points)
+        if split is None:
+            return None
+        side, c0, c1, sd = split
+        if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd:
+            return (c1 - c0) / max(sd, 1e-9), side.astype(np.int64)
+        return None
+
+    def per_wire(r):
+        found = _clean_groups(r, min_points, min_gap, max_sd)
+        return None if found is None else found[1]
+
     lab = lab.copy()
     for _ in range(depth):
         nxt = lab.max() + 1
@@ -1946,28 +2006,69 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
         for k in np.flatnonzero(np.bincount(lab) >= 2 * min_points):
             m = np.flatnonzero(lab == k)
             slope, icpt = line_fit(s[m], off[m])
-            residuals = [off[m] - slope * s[m] - icpt]
+            straight = off[m] - slope * s[m] - icpt
+            found = [clean_halves(straight)]
             if z is not None:
-                residuals.append(_height_residual(s[m], z[m], window_m))
-            best = None  # (clarity, group of each point)
-            for r in residuals:
-                split = _two_means_1d(r, min_points)
-                if split is None:
-                    continue
-                side, c0, c1, sd = split
-                clarity = (c1 - c0) / max(sd, 1e-9)
-                if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd and (best is None or clarity > best[0]):
-                    best = (clarity, side.astype(np.int64))
+                found.append(clean_halves(_height_residual(s[m], z[m], window_m)))
+            found = [f for f in found if f is not None]
+            best = max(found, key=lambda f: f[0]) if found else None  # (clarity, group of each point)
+            # a straight trend fitted to a mixture leans towards whichever wire has more points at
+            # each end; a wire's own trend does not (tried only where the straight one finds no cut)
+            own = None
+            if best is None:
+                own = _across_wires(s[m], off[m], halves, 0.5 * min_gap, start=straight)
+                best = clean_halves(own)
             if best is None:
                 # a ribbon of 3-4 wires side by side: no cut in two is clean (one side holds two
                 # wires), a cut into one group per wire is
-                best = _clean_groups(residuals[0], min_points, min_gap, max_sd)
+                best = _clean_groups(straight, min_points, min_gap, max_sd)
+            if best is None:
+                best = _clean_groups(_across_wires(s[m], off[m], per_wire, 0.5 * min_gap, start=own),
+                                     min_points, min_gap, max_sd)
             if best is not None:
                 groups = best[1]
                 for g in range(1, groups.max() + 1):
                     lab[m[groups == g]] = nxt
                     nxt += 1
     return lab
+
+
+def _across_wires(s, off, grouping, max_drift_m: float, start=None, rounds: int = 4) -> np.ndarray:
+    """Offsets across a line less the trend of the wires in them: the wires of a piece run
+    parallel, and a trend fitted to all its points together tilts towards whichever wire has more
+    points at each end (a Hough line drawn across two phases holds a third one's points past the
+    end of that phase's own line). Starting from one straight trend (or the residuals ``start``),
+    ``grouping`` (residuals -> group of each point, or None) groups the points, the common
+    slope within the groups is fitted, and so on for ``rounds`` or until the groups hold. Wires
+    that are not parallel (converging at a tower: a group's own trend drifts more than
+    ``max_drift_m`` from the common one over its extent) keep the starting residuals."""
+    if start is None:
+        slope, icpt = line_fit(s, off)
+        start = off - slope * s - icpt
+    r, g, last = start, None, None
+    for _ in range(rounds):
+        found = grouping(r)
+        if found is None:
+            break
+        g = np.asarray(found, np.int64)
+        if last is not None and np.array_equal(g, last):
+            break
+        last = g
+        n = np.bincount(g).astype(float)
+        ds = s - (np.bincount(g, s) / np.maximum(n, 1))[g]
+        do = off - (np.bincount(g, off) / np.maximum(n, 1))[g]
+        slope = float((ds * do).sum() / max(float((ds * ds).sum()), 1e-12))
+        r = off - slope * s
+        r = r - r.mean()
+    if g is None or r is start:
+        return start
+    for k in range(g.max() + 1):
+        m = g == k
+        if m.sum() >= 2 and np.ptp(s[m]) > 0:
+            own = line_fit(s[m], off[m])[0]
+            if abs(own - slope) * np.ptp(s[m]) > max_drift_m:
+                return start
+    return r
 
 
 def _clean_groups(r: np.ndarray, min_size: int, min_gap: float, max_sd: float, max_groups: int = 4):

@@ -17,6 +17,8 @@ POLE_TAKES_M = 6.0
 # how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
 # grid); a lattice tower's reaches 4-8 m
 POLE_FOOTPRINT_M = 3.0
+# tan 1 deg: a span runs along its line within 1 deg of it (as _along's lines)
+ALONG_SLOPE_MAX = 0.01746
 
 REFERENCE = ("Grigillo, Ozvaldič, Vrečko, Kosmatin Fras (2015), Geodetski vestnik 59(2) 246-261 (METHODS.md §1); "
              "3D step: catenary per span (beyond the method's stated 2D limitation)")
@@ -87,7 +89,8 @@ def _run(inputs, params, ctx):
         # a sparser survey than the method's samples its wires with gaps over V_max every few
         # spans, and each such gap cuts a run: the gap allowed scales with the measured spacing
         params["v_max_m"] = round(GAP_SPACINGS * spacing, 2)
-        timings.pop("n_lines_realigned", None)  # the lines of the run kept are the ones counted
+        for k in ("n_lines_realigned", "n_twin_lines_merged"):  # the lines of the run kept are the ones counted
+            timings.pop(k, None)
         lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx,
                                                                         timings)
     lines, geo, spans, line_of, wire_of_pt = _fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params)
@@ -101,7 +104,8 @@ def _run(inputs, params, ctx):
         counts = {}  # its stage times are second_pass_s; its turned lines count with the first's
         found2 = _lines_and_wires(pc, free, hag, cell_used, params, ctx, counts, min_fit_share=0.5, optional=True)
         if found2 is not None:
-            timings["n_lines_realigned"] = timings.get("n_lines_realigned", 0) + counts.get("n_lines_realigned", 0)
+            for k in ("n_lines_realigned", "n_twin_lines_merged"):
+                timings[k] = timings.get(k, 0) + counts.get(k, 0)
         lines, geo, spans = _add_pass(found2, lines, geo, spans, line_of, wire_of_pt, hu, params)
         timings["second_pass_s"] = time.perf_counter() - t
     n_short = 0
@@ -369,7 +373,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_twin_lines_merged": timings.pop("n_twin_lines_merged", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
@@ -785,7 +789,7 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
 
     import numpy as np
 
-    from .core import WIRE_LATERAL_RMS_M, band_owner, conductors_3d
+    from .core import WIRE_LATERAL_RMS_M, band_owner, conductors_3d, twin_lines
 
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     t = time.perf_counter()
@@ -834,6 +838,13 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         mine = np.isin(now, list(redo)) | np.isin(was, list(redo))
         line_of[mine], wire_of_pt[mine] = new_line[mine], new_wire[mine]
         timings["n_lines_realigned"] = timings.get("n_lines_realigned", 0) + turned
+    # lines either side of one wire (a ribbon's, drawn between its phases) are one line: the 3D
+    # step then tells its phases apart across it, and _side_by_side draws each
+    twins = twin_lines(spans, geo, params["max_rms_3d_m"], params["s_min_m"], params["band_3d_m"])
+    if twins:
+        lines, geo, merged = _merge_twins(lines, geo, twins, hu)
+        spans, line_of, wire_of_pt = step_3d(geo)
+        timings["n_twin_lines_merged"] = timings.get("n_twin_lines_merged", 0) + merged
     # a conductor is a wire in 3D too: a catenary span at least S_min long that fits its points,
     # is thin across the line and hangs gently (pylon members, roof edges and a crown's edge are
     # straight in plan but not wires); shorter pieces only add wire points to a conductor that has one
@@ -852,6 +863,93 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     return lines, geo, spans, line_of, wire_of_pt, len(th)
 
 
+def _merge_twins(lines, geo, pairs, hu):
+    """Each group of lines joined by ``pairs`` (twin_lines) as one: the least-squares line through
+    their ends in the frame of the longest, each line's ends weighted by its length (a stub at a
+    tower does not turn a long line), over all their extents; the longest line's conductor takes
+    it and their segments (moved onto it), the others are dropped. Returns (lines, geo, number of
+    lines merged away)."""
+    import numpy as np
+    from shapely.geometry import LineString
+
+    root = list(range(len(geo)))
+
+    def find(i):
+        while root[i] != i:
+            root[i] = root[root[i]]
+            i = root[i]
+        return i
+    for i, j in pairs:
+        root[max(find(i), find(j))] = min(find(i), find(j))
+    groups = {}
+    for i in range(len(geo)):
+        groups.setdefault(find(i), []).append(i)
+    geo = list(geo)
+    seg = lines["conductor_segments"].copy()
+    cond = lines["conductors"].copy()
+    keep = []
+    for members in groups.values():
+        main = max(members, key=lambda k: geo[k][3] - geo[k][2])
+        keep.append(main)
+        if len(members) < 2:
+            continue
+        ah, dh, _, _ = geo[main]
+        nh = np.array([-dh[1], dh[0]])
+        ends = np.array([a + t * d for k in members for a, d, *ts in [geo[k]] for t in ts])
+        w = np.repeat([geo[k][3] - geo[k][2] for k in members], 2)
+        s, o = (ends - ah) @ dh, (ends - ah) @ nh
+        sm, om = (w @ s) / w.sum(), (w @ o) / w.sum()
+        slope = float(w @ ((s - sm) * (o - om)) / max(float(w @ (s - sm) ** 2), 1e-12))
+        d2 = (dh + slope * nh) / np.hypot(1.0, slope)
+        a2 = ah + s.min() * dh + (om + slope * (s.min() - sm)) * nh
+        geo[main] = (a2, d2, 0.0, float((s.max() - s.min()) * np.hypot(1.0, slope)))
+
+        def onto(xy, a2=a2, d2=d2):
+            p = np.asarray(xy) * hu
+            return tuple((a2 + float((p - a2) @ d2) * d2) / hu)
+        row = cond.index[main]
+        cond.loc[row, "geometry"] = LineString([onto(a2 / hu), onto((a2 + geo[main][3] * d2) / hu)])
+        if "azimuth_deg" in cond.columns:
+            cond.loc[row, "azimuth_deg"] = float(np.degrees(np.arctan2(d2[0], d2[1])) % 180.0)
+        if "length_m" in cond.columns:
+            cond.loc[row, "length_m"] = geo[main][3]
+        for k in seg.index[seg["conductor"].isin(members)]:
+            seg.loc[k, "geometry"] = LineString([onto(c) for c in seg.loc[k, "geometry"].coords])
+            seg.loc[k, "conductor"] = main
+    keep = sorted(keep)
+    out = _select_conductors({"conductors": cond, "conductor_segments": seg}, keep)
+    for name in ("conductors", "conductor_segments"):
+        out[name].attrs.update(lines[name].attrs)
+    return {**lines, **out}, [geo[k] for k in keep], len(geo) - len(keep)
+
+
+def _plan_trends(spans, params) -> dict:
+    """Per line, the plan trend of its wires: their spans' offset slope along it, pooled over the
+    spans that fit and are S_min long, each weighted by its precision. line -> (trend, whether the
+    spans agree on it (no bend at a support, no fan of wires), and per span: weight, middle along
+    the line, offset there, points)."""
+    import numpy as np
+
+    from .core import WIRE_LATERAL_RMS_M
+
+    pooled = {}  # line -> [(weight of its slope, slope, middle, offset there, points)] per span
+    for sp in spans:
+        length = sp.s_to - sp.s_from
+        if sp.rms <= params["max_rms_3d_m"] and length >= params["s_min_m"] and sp.offset_rms <= WIRE_LATERAL_RMS_M:
+            # 1 / var(slope) of a least-squares line through n points spread evenly over the span
+            w = sp.n_points * length ** 2 / 12.0 / max(sp.offset_rms, 0.01) ** 2
+            mid = 0.5 * (sp.s_from + sp.s_to)
+            pooled.setdefault(sp.conductor, []).append((w, sp.offset_slope, mid, sp.offset + sp.offset_slope * mid,
+                                                        sp.n_points))
+    out = {}
+    for li, rows in pooled.items():
+        w, slope, mid, off, n = map(np.array, zip(*rows))
+        trend = float(w @ slope / w.sum())
+        agree = bool(w @ (slope - trend) ** 2 <= 9.0 * max(len(w) - 1, 1))
+        out[li] = (trend, agree, w, mid, off, n)
+    return out
+
+
 def _realign(lines, geo, spans, params, hu):
     """Lines turned onto the plan trend of their wires: the Hough's line through a wire seen from
     one side (a mobile scanner's view of a line crossing its street) can lean off it by a few
@@ -865,22 +963,8 @@ def _realign(lines, geo, spans, params, hu):
     import numpy as np
     from shapely.geometry import LineString
 
-    from .core import WIRE_LATERAL_RMS_M
-
-    pooled = {}  # line -> [(weight of its slope, slope, middle, offset there, points)] per span
-    for sp in spans:
-        length = sp.s_to - sp.s_from
-        if sp.rms <= params["max_rms_3d_m"] and length >= params["s_min_m"] and sp.offset_rms <= WIRE_LATERAL_RMS_M:
-            # 1 / var(slope) of a least-squares line through n points spread evenly over the span
-            w = sp.n_points * length ** 2 / 12.0 / max(sp.offset_rms, 0.01) ** 2
-            mid = 0.5 * (sp.s_from + sp.s_to)
-            pooled.setdefault(sp.conductor, []).append((w, sp.offset_slope, mid, sp.offset + sp.offset_slope * mid,
-                                                        sp.n_points))
     turn = {}
-    for li, rows in pooled.items():
-        w, slope, mid, off, n = map(np.array, zip(*rows))
-        trend = float(w @ slope / w.sum())
-        agree = w @ (slope - trend) ** 2 <= 9.0 * max(len(w) - 1, 1)  # no bend at a support, no fan of wires
+    for li, (trend, agree, w, mid, off, n) in _plan_trends(spans, params).items():
         if abs(trend) * (geo[li][3] - geo[li][2]) > params["band_m"] and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
             pivot = float(w @ mid / w.sum())
             # the line moves onto its wire there: the offset most of its points share (another
@@ -924,8 +1008,10 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
     ``wire_of``: per input point, ``x``, ``y`` in metres); a group along another conductor (a
     phase that line also holds) joins it, as further wires. Sub-conductors closer than
     ``min_gap_m`` in plan (default: the 3D step's own cut, SIDE_BY_SIDE_MIN_GAP_M; a triangle
-    bundle's 0.2 m) stay one conductor per phase. Returns (lines, geo, spans, conductor_of,
-    wire_of, number of conductors added)."""
+    bundle's 0.2 m) stay one conductor per phase. Spans are grouped by their offsets about the
+    line's plan trend (``_plan_trends``, where its spans agree on one), spans more than 1 deg off
+    the line (jumpers) left out. Returns (lines, geo, spans, conductor_of, wire_of, number of
+    conductors added)."""
     import numpy as np
     import pandas as pd
     from shapely.geometry import LineString
@@ -941,11 +1027,19 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
     next_wire = {li: int(max([sp.wire for sp in spans if sp.conductor == li], default=-1)) + 1
                  for li in range(len(geo))}
     moved = {}  # original conductor -> [(new index, offset trend (slope, intercept))]
+    plan = _plan_trends(spans, params)
     for li in range(len(geo)):
-        mine = [sp for sp in fitting if sp.conductor == li]
+        # spans along the line (within 1 deg, as _along): a jumper at a tower, crossing the gap
+        # between two wires over its few metres, would join their groups
+        mine = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
         if len(mine) < 2:
             continue
-        mid = np.array([sp.offset + sp.offset_slope * 0.5 * (sp.s_from + sp.s_to) for sp in mine])
+        # span middles' offsets about the wires' own plan trend: the Hough's line can lie across
+        # two phases at a small angle, so that one phase's offset drifts along it by a good part
+        # of the gap to the next
+        trend, agree = plan.get(li, (0.0, False))[:2]
+        smid = np.array([0.5 * (sp.s_from + sp.s_to) for sp in mine])
+        mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - (trend if agree else 0.0) * smid
         order = np.argsort(mid)
         # runs of span offsets without a gap of half min_gap_m, then neighbouring runs whose
         # middles lie closer than min_gap_m joined
