@@ -1986,8 +1986,8 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
         split = _two_means_1d(r, min_points)
         return None if split is None else split[0].astype(np.int64)
 
-    def clean_halves(r):
-        split = _two_means_1d(r, min_points)
+    def clean_halves(r, split=None):
+        split = _two_means_1d(r, min_points) if split is None else split
         if split is None:
             return None
         side, c0, c1, sd = split
@@ -2007,22 +2007,25 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
             m = np.flatnonzero(lab == k)
             slope, icpt = line_fit(s[m], off[m])
             straight = off[m] - slope * s[m] - icpt
-            found = [clean_halves(straight)]
+            across = _two_means_1d(straight, min_points)
+            found = [clean_halves(straight, across)]
             if z is not None:
                 found.append(clean_halves(_height_residual(s[m], z[m], window_m)))
             found = [f for f in found if f is not None]
             best = max(found, key=lambda f: f[0]) if found else None  # (clarity, group of each point)
             # a straight trend fitted to a mixture leans towards whichever wire has more points at
-            # each end; a wire's own trend does not (tried only where the straight one finds no cut)
-            own = None
-            if best is None:
+            # each end; a wire's own trend does not (tried only where the straight one finds no
+            # clean cut but two groups min_gap apart: a lone wire's halves lie closer)
+            apart = across is not None and across[2] - across[1] >= 0.5 * min_gap
+            own = straight
+            if best is None and apart:
                 own = _across_wires(s[m], off[m], halves, 0.5 * min_gap, start=straight)
                 best = clean_halves(own)
             if best is None:
                 # a ribbon of 3-4 wires side by side: no cut in two is clean (one side holds two
                 # wires), a cut into one group per wire is
                 best = _clean_groups(straight, min_points, min_gap, max_sd)
-            if best is None:
+            if best is None and own is not straight and _clean_groups(own, min_points, min_gap, max_sd) is not None:
                 best = _clean_groups(_across_wires(s[m], off[m], per_wire, 0.5 * min_gap, start=own),
                                      min_points, min_gap, max_sd)
             if best is not None:
@@ -2077,7 +2080,8 @@ def _clean_groups(r: np.ndarray, min_size: int, min_gap: float, max_sd: float, m
     deviations of the widest group apart, that group no wider than ``max_sd``: (clarity, group of
     each value, numbered from the lowest), or None."""
     for k in range(3, max_groups + 1):
-        if len(r) < k * min_size:
+        # (k centres min_gap apart lie within the values' range: too narrow, none of k or more)
+        if len(r) < k * min_size or np.ptp(r) < (k - 1) * min_gap:
             return None
         centres = np.quantile(r, (np.arange(k) + 0.5) / k)
         for _ in range(50):
