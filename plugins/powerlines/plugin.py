@@ -870,20 +870,16 @@ def _merge_twins(lines, geo, pairs, hu):
     it and their segments (moved onto it), the others are dropped. Returns (lines, geo, number of
     lines merged away)."""
     import numpy as np
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
     from shapely.geometry import LineString
 
-    root = list(range(len(geo)))
-
-    def find(i):
-        while root[i] != i:
-            root[i] = root[root[i]]
-            i = root[i]
-        return i
-    for i, j in pairs:
-        root[max(find(i), find(j))] = min(find(i), find(j))
+    i, j = np.array(pairs, np.int64).reshape(-1, 2).T
+    _, group_of = connected_components(sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(len(geo), len(geo))),
+                                       directed=False)
     groups = {}
-    for i in range(len(geo)):
-        groups.setdefault(find(i), []).append(i)
+    for k, g in enumerate(group_of):
+        groups.setdefault(int(g), []).append(k)
     geo = list(geo)
     seg = lines["conductor_segments"].copy()
     cond = lines["conductors"].copy()
@@ -908,7 +904,7 @@ def _merge_twins(lines, geo, pairs, hu):
             p = np.asarray(xy) * hu
             return tuple((a2 + float((p - a2) @ d2) * d2) / hu)
         row = cond.index[main]
-        cond.loc[row, "geometry"] = LineString([onto(a2 / hu), onto((a2 + geo[main][3] * d2) / hu)])
+        cond.loc[row, "geometry"] = LineString([a2 / hu, (a2 + geo[main][3] * d2) / hu])
         if "azimuth_deg" in cond.columns:
             cond.loc[row, "azimuth_deg"] = float(np.degrees(np.arctan2(d2[0], d2[1])) % 180.0)
         if "length_m" in cond.columns:
