@@ -934,6 +934,15 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
     assert _arms(cond3, [big], 1.0) == {1, 2}
     held = []
     assert _arms(cond3, [big], 1.0, with_arms=held, own_only=True) == {2} and held == [0]
+    # a Hough line across the tower drawn 60 m long through the wires' crossings beside it, whose
+    # only fitting span is the tower's cross-arm (bundle3_d30 seed 6): its wire's ends decide
+    cond4 = gpd.GeoDataFrame({"conductor": range(2)}, geometry=[LineString([(0, 50), (100, 50)]),
+                                                                 LineString([(51, 20), (51, 80)])])
+    assert _arms(cond4, [big], 1.0) == set()
+    arm_ends = [None, np.array([[51.0, 46.0], [51.0, 55.0]])]
+    assert _arms(cond4, [big], 1.0, wire_ends=arm_ends) == {1}
+    # a wire of its own there, fitted 30 m past the tower, stays a conductor
+    assert _arms(cond4, [big], 1.0, wire_ends=[None, np.array([[51.0, 46.0], [51.0, 80.0]])]) == set()
 
 
 def test_a_tower_stands_under_its_lines_and_a_tree_beside_them_does_not():

@@ -217,10 +217,11 @@ def _run(inputs, params, ctx):
     pylons, tower_pt, found = _pylons(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu, dtm,
                                       params, passed_by=passed_by)
     with_arms, own_arms = [], []
-    arms = _arms(lines["conductors"], found, hu, with_arms=with_arms)
+    wire_ends = _wire_ends(geo, spans, params["max_rms_3d_m"])
+    arms = _arms(lines["conductors"], found, hu, with_arms=with_arms, wire_ends=wire_ends)
     # a tower the wires run through (a suspension tower where the 3D step did not cut them) has
     # more spans past it than ending at it, as a tree has; a line that never leaves it is its arm
-    arms |= _arms(lines["conductors"], passed_by, hu, with_arms=own_arms, own_only=True)
+    arms |= _arms(lines["conductors"], passed_by, hu, with_arms=own_arms, own_only=True, wire_ends=wire_ends)
     if arms:
         kept = [i for i in range(len(geo)) if i not in arms]
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
@@ -741,7 +742,7 @@ def _add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, foun
 
 
 def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0, with_arms=None,
-          own_only: bool = False) -> set:
+          own_only: bool = False, wire_ends=None) -> set:
     """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
     ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
     conductor reaching the same tower at ``min_angle_deg`` or more: straight, level lines that
@@ -749,7 +750,10 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     across it stays a wire.) A conductor within the tower's own extent (its cells' reach and a
     metre) is part of it whatever crosses it: the arms of a tower whose line is not found there
     (a gap in the data beside it). ``with_arms``, a list, gets the indices of the towers with arms;
-    ``own_only``: only the lines within a tower's own extent."""
+    ``own_only``: only the lines within a tower's own extent. ``wire_ends``: per conductor, the
+    ends of the stretch its fitting spans cover, where known (a tower's cross-arm drawn by the
+    Hough through the wire crossings beside it reaches far past the tower; its only wire is the
+    arm)."""
     if not found or not len(cond):
         return set()
     import numpy as np
@@ -764,6 +768,8 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
     lines = [LineString(np.asarray(g.coords)[:, :2] * hu) for g in cond.geometry]
     ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
     unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
+    if wire_ends is not None:
+        ends = [np.asarray(w) if w is not None else e for w, e in zip(wire_ends, ends)]
     arms = set()
     for k, (x, y, reach, own) in enumerate(towers):
         mine = {i for i, e in enumerate(ends) if (np.hypot(e[:, 0] - x, e[:, 1] - y) <= own).all()}
@@ -779,6 +785,22 @@ def _arms(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45
             with_arms.append(k)
         arms |= mine
     return arms
+
+
+def _wire_ends(geo, spans, max_rms: float) -> list:
+    """Per conductor, the plan ends of the stretch its fitting spans cover along its line (None
+    where no span fits)."""
+    import numpy as np
+
+    reach = {}
+    for sp in spans:
+        if sp.rms <= max_rms:
+            lo, hi = reach.get(sp.conductor, (np.inf, -np.inf))
+            reach[sp.conductor] = (min(lo, sp.s_from), max(hi, sp.s_to))
+    out = []
+    for li, (a, d, _, _) in enumerate(geo):
+        out.append(np.array([a + reach[li][0] * d, a + reach[li][1] * d]) if li in reach else None)
+    return out
 
 
 def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0, optional=False):
