@@ -516,6 +516,36 @@ def test_a_scan_row_on_a_roof_lies_in_a_surface_and_wires_do_not():
     assert not span_on_surface(at_pole[:, 0], at_pole[:, 1], at_pole[:, 2], 0.0, L)
 
 
+def test_a_short_wire_along_two_roofs_tops_lies_in_surfaces_and_a_wire_over_them_does_not():
+    """A short wire found along the top edges of two roofs a street apart (mobile_comm3 seed 6:
+    a 24 m "wire" through two gables' top rows): neither roof spans 0.3 of it, nor do both lie
+    at one tilt, so the whole span is in no surface; cut where its points leave a gap, each
+    piece lies in a roof of its own. The same wire 1 m over the roofs, and a ribbon's wire with
+    a gap in it, are in none."""
+    from toolbox_plugins.powerlines.core import Span
+    from toolbox_plugins.powerlines.plugin import _pieces_on_surfaces
+
+    rng = np.random.default_rng(3)
+
+    def roof(s_from, s_to, tilt_deg, lift=0.0, n_per_row=60):
+        u = (np.cos(np.radians(tilt_deg)), -np.sin(np.radians(tilt_deg)))
+        pts = [np.column_stack([rng.uniform(s_from, s_to, n_per_row), t * u[0] + rng.normal(0, 0.02, n_per_row),
+                                t * u[1] - lift + rng.normal(0, 0.02, n_per_row)]) for t in np.arange(0.0, 3.0, 0.25)]
+        return np.vstack(pts)
+
+    sp = Span(0, 0, 0, 12.0, 1e6, 0.0, 0.0, 24.0, 0.03, 0, 0.0)
+    two = np.vstack([roof(0.0, 6.5, 20.0), roof(17.5, 24.0, -35.0)])
+    assert not span_on_surface(two[:, 0], two[:, 1], two[:, 2], 0.0, 24.0)
+    assert _pieces_on_surfaces(two[:, 0], two[:, 1], two[:, 2], sp) > 0.9
+    # 1 m over the roofs: its pieces are in no surface (the roofs pass a metre under them)
+    wire = np.column_stack([np.r_[rng.uniform(0, 6.5, 80), rng.uniform(17.5, 24, 80)], rng.normal(0, 0.02, 160),
+                            rng.normal(0, 0.02, 160)])
+    below = np.vstack([roof(0.0, 6.5, 20.0, lift=1.0)[60:], roof(17.5, 24.0, -35.0, lift=1.0)[60:], wire])
+    assert _pieces_on_surfaces(below[:, 0], below[:, 1], below[:, 2], sp) == 0.0
+    ribbon = np.vstack([np.column_stack([wire[:, 0], wire[:, 1] + o, wire[:, 2]]) for o in (0.0, 0.4, 0.8, 1.2)])
+    assert _pieces_on_surfaces(ribbon[:, 0], ribbon[:, 1], ribbon[:, 2], sp) == 0.0
+
+
 def test_a_second_pass_line_along_a_first_is_folded_into_it():
     """A second-pass line 0.5 degrees off a first-pass line it runs along (the wire past the end
     of the first line's extent): its span, re-expressed in the first line's frame, describes the
@@ -2369,6 +2399,48 @@ def test_lines_that_both_end_at_a_support_do_not_cross_there():
     assert len(crossings(lines, [seg1, seg2], supports=[tower])) == 0
     # each ending at a support of its own (two poles 9 m apart, either side of where they meet)
     assert len(crossings(lines, [seg1, seg2], supports=[(-3.0, -4.0, 4.6), (3.0, 4.0, 4.6)])) == 1
+
+
+def test_a_circuit_ends_where_its_conductors_end_together_and_reaches_as_far_as_its_longest():
+    """Line B's three wires end together 1 m from line A's far conductor, at a pole a street scan
+    saw too little of to find (mobile_stacked seed 5: 3 false crossings 1.3-3.7 m past B's end):
+    their common end is a support, and no B wire crosses A past it; the same ends at the data's
+    edge are not (the lines run on out of the survey). A wire of B seen 3.8 m short of its
+    sibling's end, beside line A's pole (mobile_dist seed 5: 2 crossings missed), reaches on as
+    far as its sibling."""
+    from toolbox_plugins.powerlines.plugin import _circuit_ends, _circuit_reach
+
+    u = np.array([0.0, 1.0])
+    b_lines = [(np.array([x, 0.0]), u) for x in (48.0, 50.0, 52.0)]
+    b_checks = [[(np.array([x, -8.0]), np.array([x, 60.0 + dy]))] for x, dy in ((48.0, 0.3), (50.0, 0.0), (52.0, -0.4))]
+    a_far = (np.array([0.0, 62.0]), np.array([1.0, 0.0]))  # 2 m past B's ends
+    a_seg = [[(np.array([0.0, 62.0]), np.array([100.0, 62.0]))]]
+    bounds = (0.0, -10.0, 100.0, 100.0)  # B enters the survey at its edge
+    ends = _circuit_ends(b_lines + [a_far], b_checks + a_seg, bounds)
+    assert len(ends) == 1 and abs(ends[0][0] - 50.0) < 1e-9 and abs(ends[0][1] - 60.0) < 0.5
+    assert len(crossings(b_lines + [a_far], b_checks + a_seg)) == 3  # the 5 m extension
+    assert len(crossings(b_lines + [a_far], b_checks + a_seg, supports=ends)) == 0
+    # at the data's edge (y = 63) their ends are where the survey stops, not a support
+    assert _circuit_ends(b_lines + [a_far], b_checks + a_seg, (0.0, -10.0, 100.0, 63.0)) == []
+    # one wire alone ending there is no circuit's end
+    assert _circuit_ends(b_lines[:1] + [a_far], b_checks[:1] + a_seg, bounds) == []
+
+    # B's wire at x = 50 seen to y = 56.2, its sibling 2.4 m beside it to y = 60; line A's pole
+    # at (49.6, 58.2) beside its end: A's wire at y = 58.6 crosses it 2.4 m past its seen end
+    short = [[(np.array([50.0, 0.0]), np.array([50.0, 56.2]))], [(np.array([52.4, 0.0]), np.array([52.4, 60.0]))]]
+    pair = [(np.array([50.0, 0.0]), u), (np.array([52.4, 0.0]), u)]
+    a_wire = (np.array([0.0, 58.6]), np.array([1.0, 0.0]))
+    a_chk = [[(np.array([0.0, 58.6]), np.array([100.0, 58.6]))]]
+    pole = [(49.6, 58.2, 3.0)]
+    assert len(crossings(pair + [a_wire], short + a_chk, supports=pole)) == 1  # the sibling's only
+    reach = _circuit_reach(pair + [a_wire], short + a_chk)
+    assert len(crossings(pair + [a_wire], reach, supports=pole)) == 2
+    # a sibling ending over max_m farther, or over across_m beside it, carries nothing
+    far = [short[0], [(np.array([52.4, 0.0]), np.array([52.4, 62.0]))]]
+    assert _circuit_reach(pair, far)[0] == far[0]
+    wide = [(np.array([50.0, 0.0]), u), (np.array([53.5, 0.0]), u)]
+    apart = [short[0], [(np.array([53.5, 0.0]), np.array([53.5, 60.0]))]]
+    assert _circuit_reach(wide, apart)[0] == apart[0]
 
 
 def test_false_crossings_are_those_far_from_every_true_one():

@@ -354,7 +354,9 @@ def _run(inputs, params, ctx):
     c3d = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs) if rows else gpd.GeoDataFrame(
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
-    crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found)
+    bounds = (float(pc.x.min()) * hu, float(pc.y.min()) * hu, float(pc.x.max()) * hu, float(pc.y.max()) * hu)
+    crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found,
+                              bounds=bounds)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
               "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
@@ -1193,7 +1195,7 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         flat = core_n = ring_n = 0
         for k, sp in numbered:
             o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
-            if span_on_surface(s, o, dz, sp.s_from, sp.s_to):
+            if span_on_surface(s, o, dz, sp.s_from, sp.s_to) or _pieces_on_surfaces(s, o, dz, sp) > 0.5:
                 flat += sp.n_points
             elif below is not None and span_on_surface(
                     sb, offb - sp.offset - sp.offset_slope * sb, zb - catenary(sb, sp.z0, sp.s0, sp.c), sp.s_from,
@@ -1209,6 +1211,29 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         if flat > 0.5 * sum(sp.n_points for sp in line_spans) or core_ring_contrast(core_n, ring_n) < min_contrast:
             out.add(li)
     return out
+
+
+def _pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
+    """The share of the span ``sp``'s own points (``s`` along its line, ``off`` across and ``dz``
+    over its curve, as for span_on_surface) that lie in pieces, cut where its points leave gaps
+    over ``gap_m``, each in a surface of its own: a short wire found along the top edges of two
+    roofs a street apart lies in neither surface over its whole length, nor at one tilt."""
+    import numpy as np
+
+    from .core import span_on_surface
+
+    own = (s >= sp.s_from) & (s <= sp.s_to) & (np.abs(off) <= lateral_m) & (np.abs(dz) <= max(3 * sp.rms, 0.15))
+    ss = np.sort(s[own])
+    if len(ss) < 2:
+        return 0.0
+    cut = np.flatnonzero(np.diff(ss) > gap_m)
+    if not len(cut):
+        return 0.0  # one piece: the whole span's test
+    on = 0
+    for lo, hi in zip(np.r_[0, cut + 1], np.r_[cut, len(ss) - 1]):
+        if ss[hi] - ss[lo] >= 1.0 and span_on_surface(s, off, dz, ss[lo], ss[hi]):
+            on += hi - lo + 1
+    return on / len(ss)
 
 
 def _drop_spans(gone, spans, geo, px, py, line_of, wire_of_pt):
@@ -1322,13 +1347,90 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     return {"conductors": new_cond, "conductor_segments": seg}
 
 
-def _crossings_of(cond, segs, validation: str, hu: float, found=()):
+def _circuit_ends(lines, checks, bounds, max_angle_deg: float = 1.0, across_m: float = 5.0, along_m: float = 1.0,
+                  edge_m: float = 5.0) -> list:
+    """Supports seen or not: where two or more parallel conductors (within ``max_angle_deg``
+    and ``across_m`` of one another) have the far ends of their checked extents (``checks``, per
+    line a list of (a, b)) within ``along_m`` of one another along them, more than ``edge_m``
+    inside the data's ``bounds`` (xmin, ymin, xmax, ymax): the circuit ends there, at a pole
+    the scan saw too little of to find (a street scanner's view of a pole across the block).
+    Returns [(x, y, reach_m)], each reaching its members' ends and a metre."""
+    import numpy as np
+
+    ends = []  # (line, position, outward direction)
+    for i, ((a, d), segs) in enumerate(zip(lines, checks)):
+        if not len(segs):
+            continue
+        pts = np.array([e for seg in segs for e in seg], float)
+        t = (pts - a) @ d
+        for k, sign in ((int(np.argmin(t)), -1.0), (int(np.argmax(t)), 1.0)):
+            e = pts[k]
+            if (e[0] - bounds[0] > edge_m and bounds[2] - e[0] > edge_m and e[1] - bounds[1] > edge_m
+                    and bounds[3] - e[1] > edge_m):
+                ends.append((i, e, sign * d))
+    cos_max = np.cos(np.radians(max_angle_deg))
+    out, used = [], set()
+    for k, (i, e, u) in enumerate(ends):
+        if k in used:
+            continue
+        group = [k] + [m for m in range(k + 1, len(ends)) if m not in used and ends[m][0] != i
+                       and float(ends[m][2] @ u) >= cos_max and abs(float((ends[m][1] - e) @ u)) <= along_m
+                       and abs(float(u[0] * (ends[m][1] - e)[1] - u[1] * (ends[m][1] - e)[0])) <= across_m]
+        if len({ends[m][0] for m in group}) < 2:
+            continue
+        used.update(group)
+        pts = np.array([ends[m][1] for m in group])
+        centre = pts.mean(axis=0)
+        out.append((float(centre[0]), float(centre[1]), float(np.hypot(*(pts - centre).T).max()) + 1.0))
+    return out
+
+
+def _circuit_reach(lines, checks, max_angle_deg: float = 1.0, across_m: float = 3.0, min_m: float = 1.0,
+                   max_m: float = 5.0) -> list:
+    """``checks`` (per line a list of (a, b)) with each line's far ends carried on to where a
+    parallel conductor of its circuit (within ``max_angle_deg``, its end within ``across_m``
+    across) is seen to end, ``min_m`` to ``max_m`` farther: the phases of a circuit end at one
+    support, so a wire seen short of its sibling's end runs on (unseen) at least that far, past
+    a support of another line beside it (mobile_dist seed 5: line B's wire seen 2 m short of line
+    A's pole, its sibling on to B's own pole 1.9 m past it, which was taken for A's). Ends
+    closer than ``min_m`` are where each wire was seen to, at one support (the crossings'
+    margin past a line's seen end covers them)."""
+    import numpy as np
+
+    cos_max = np.cos(np.radians(max_angle_deg))
+    far = []  # per line: (position, outward direction) of each far end
+    for (a, d), segs in zip(lines, checks):
+        if not len(segs):
+            far.append([])
+            continue
+        pts = np.array([e for seg in segs for e in seg], float)
+        t = (pts - a) @ d
+        far.append([(pts[int(np.argmin(t))], -d), (pts[int(np.argmax(t))], d)])
+    out = [list(c) for c in checks]
+    for i, ends in enumerate(far):
+        for e, u in ends:
+            ahead = min_m
+            for j, other in enumerate(far):
+                if j == i:
+                    continue
+                for f, v in other:
+                    w = f - e
+                    along, across = float(w @ u), abs(float(u[0] * w[1] - u[1] * w[0]))
+                    if float(u @ v) >= cos_max and across <= across_m and ahead < along <= max_m:
+                        ahead = along
+            if ahead > min_m:
+                out[i].append((e, e + ahead * u))
+    return out
+
+
+def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None):
     """The ``crossings`` layer of the final conductors, whichever pass found them: pairs of plan
     lines (``cond``) confirmed by their extents or (``segments``, the paper) by their validated
     ``segs``, as the Hough confirms its own. A crossing the Hough merged with a line dropped
     later (a tower member through the same point) is then still a crossing of the lines kept.
-    A line that ends at a found tower or pole (``found``; its footprint's reach and 3 m) crosses
-    nothing past that end."""
+    A line that ends at a found tower or pole (``found``; its footprint's reach and 3 m), or
+    where its circuit ends (``_circuit_ends`` within the data's ``bounds``), crosses nothing past
+    that end; a line reaches at least as far as its circuit's other conductors (``_circuit_reach``)."""
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point
@@ -1344,7 +1446,11 @@ def _crossings_of(cond, segs, validation: str, hu: float, found=()):
         lines.append((a, (b - a) / max(float(np.hypot(*(b - a))), 1e-12)))
         checks.append([(a, b)] if validation == "extent" else
                       [ends(s) for s in segs.geometry[(segs["conductor"] == i).to_numpy()]])
-    cross = crossings(lines, checks, supports=[(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found])
+    checks = _circuit_reach(lines, checks)
+    supports = [(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found]
+    if bounds is not None:
+        supports += _circuit_ends(lines, checks, bounds)
+    cross = crossings(lines, checks, supports=supports)
     rows = [{"n_lines": k["n_lines"], "angle_deg": k["angle_deg"], "conductors": ",".join(map(str, k["lines"]))}
             for k in cross]
     geoms = gpd.GeoSeries([Point(k["x"] / hu, k["y"] / hu) for k in cross], crs=cond.crs)
