@@ -2028,12 +2028,79 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
             if best is None and own is not straight and _clean_groups(own, min_points, min_gap, max_sd) is not None:
                 best = _clean_groups(_across_wires(s[m], off[m], per_wire, 0.5 * min_gap, start=own),
                                      min_points, min_gap, max_sd)
+            if best is None and apart and np.ptp(s[m]) >= 2 * WINDOWED_SPLIT_M:
+                # the phases' offsets about any straight trend move together along a long piece
+                # (0.2-0.3 m over 373 m on ribbon04_d5 seed 8): grouped window by window, linked
+                groups = _windowed_groups(s[m], off[m], min_points, min_gap, max_sd, WINDOWED_SPLIT_M)
+                best = None if groups is None else (0.0, groups)
             if best is not None:
                 groups = best[1]
                 for g in range(1, groups.max() + 1):
                     lab[m[groups == g]] = nxt
                     nxt += 1
     return lab
+
+
+WINDOWED_SPLIT_M = 50.0
+
+
+def _windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, window_m: float):
+    """One group per wire of a long piece whose wires move together across its line: in each
+    window of about ``window_m`` along it, the offsets about the window's own straight trend cut
+    cleanly (in two, or one group per wire, or one wire alone); a window's groups are linked to
+    the next window's where their own trends meet at the window border within half of
+    ``min_gap``. The groups (0..) of the points, or None where a window has no clean cut or the
+    links are not one to one."""
+    lo, hi = float(s.min()), float(s.max())
+    n_win = int(np.ceil((hi - lo) / window_m))
+    if n_win < 2:
+        return None
+    edges = lo + (hi - lo) * np.arange(n_win + 1) / n_win
+    win = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, n_win - 1)
+    trends, members = [], []
+    for w in range(n_win):
+        i = np.flatnonzero(win == w)
+        if len(i) < min_points:
+            return None
+        slope, icpt = line_fit(s[i], off[i])
+        r = off[i] - slope * s[i] - icpt
+        split = _two_means_1d(r, min_points)
+        if split is not None and split[2] - split[1] < 0.5 * min_gap:
+            g = np.zeros(len(i), np.int64)  # one wire
+        elif split is not None and split[2] - split[1] >= max(min_gap, 4 * split[3]) and split[3] <= max_sd:
+            g = split[0].astype(np.int64)
+        else:
+            found = _clean_groups(r, min_points, min_gap, max_sd)
+            if found is None:
+                return None
+            g = found[1]
+        trends.append([line_fit(s[i[g == k]], off[i[g == k]]) for k in range(g.max() + 1)])
+        members.append([i[g == k] for k in range(g.max() + 1)])
+    label = [list(range(len(members[0])))]
+    nxt = len(members[0])
+    for w in range(1, n_win):
+        b = edges[w]
+        prev = np.array([t[0] * b + t[1] for t in trends[w - 1]])
+        mine = []
+        for t in trends[w]:
+            d = np.abs(prev - (t[0] * b + t[1]))
+            k = int(np.argmin(d))
+            mine.append(label[w - 1][k] if d[k] <= 0.5 * min_gap else -1)
+        linked = [x for x in mine if x >= 0]
+        if len(linked) != len(set(linked)):
+            return None
+        for j, x in enumerate(mine):
+            if x < 0:
+                mine[j] = nxt
+                nxt += 1
+        label.append(mine)
+    if nxt < 2:
+        return None
+    out = np.zeros(len(s), np.int64)
+    for w in range(n_win):
+        for k, idx in enumerate(members[w]):
+            out[idx] = label[w][k]
+    return out
 
 
 def _across_wires(s, off, grouping, max_drift_m: float, start=None, rounds: int = 4) -> np.ndarray:
