@@ -546,7 +546,7 @@ def test_a_short_wire_along_two_roofs_tops_lies_in_surfaces_and_a_wire_over_them
     piece lies in a roof of its own. The same wire 1 m over the roofs, and a ribbon's wire with
     a gap in it, are in none."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _pieces_on_surfaces
+    from toolbox_plugins.powerlines.core import _pieces_on_surfaces
 
     rng = np.random.default_rng(3)
 

@@ -1481,6 +1481,25 @@ def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0
     return False
 
 
+def _pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
+    """The share of the span ``sp``'s own points (``s`` along its line, ``off`` across and ``dz``
+    over its curve, as for span_on_surface) that lie in pieces, cut where its points leave gaps
+    over ``gap_m``, each in a surface of its own: a short wire found along the top edges of two
+    roofs a street apart lies in neither surface over its whole length, nor at one tilt."""
+    own = (s >= sp.s_from) & (s <= sp.s_to) & (np.abs(off) <= lateral_m) & (np.abs(dz) <= max(3 * sp.rms, 0.15))
+    ss = np.sort(s[own])
+    if len(ss) < 2:
+        return 0.0
+    cut = np.flatnonzero(np.diff(ss) > gap_m)
+    if not len(cut):
+        return 0.0  # one piece: the whole span's test
+    on = 0
+    for lo, hi in zip(np.r_[0, cut + 1], np.r_[cut, len(ss) - 1]):
+        if ss[hi] - ss[lo] >= 1.0 and span_on_surface(s, off, dz, ss[lo], ss[hi]):
+            on += hi - lo + 1
+    return on / len(ss)
+
+
 def _spans_by_line(spans, lines, px, py, max_rms: float):
     """Per conductor holding a span that fits (rms <= ``max_rms``): (its index, those spans, the
     points' positions ``s`` along it and ``off`` across it). ``lines`` as for conductors_3d."""
@@ -1987,13 +2006,7 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
         return None if split is None else split[0].astype(np.int64)
 
     def clean_halves(r, split=None):
-        split = _two_means_1d(r, min_points) if split is None else split
-        if split is None:
-            return None
-        side, c0, c1, sd = split
-        if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd:
-            return (c1 - c0) / max(sd, 1e-9), side.astype(np.int64)
-        return None
+        return _clean_cut(_two_means_1d(r, min_points) if split is None else split, min_gap, max_sd)
 
     def per_wire(r):
         found = _clean_groups(r, min_points, min_gap, max_sd)
@@ -2041,6 +2054,18 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
     return lab
 
 
+def _clean_cut(split, min_gap: float, max_sd: float):
+    """A two-means ``split`` (side, centres, pooled sd) as a clean cut: centres ``min_gap`` and 4
+    pooled standard deviations apart, that spread no wider than ``max_sd``: (clarity, group of
+    each value), or None."""
+    if split is None:
+        return None
+    side, c0, c1, sd = split
+    if c1 - c0 >= max(min_gap, 4 * sd) and sd <= max_sd:
+        return (c1 - c0) / max(sd, 1e-9), side.astype(np.int64)
+    return None
+
+
 WINDOWED_SPLIT_M = 50.0
 
 
@@ -2067,10 +2092,8 @@ def _windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, win
         split = _two_means_1d(r, min_points)
         if split is not None and split[2] - split[1] < 0.5 * min_gap:
             g = np.zeros(len(i), np.int64)  # one wire
-        elif split is not None and split[2] - split[1] >= max(min_gap, 4 * split[3]) and split[3] <= max_sd:
-            g = split[0].astype(np.int64)
         else:
-            found = _clean_groups(r, min_points, min_gap, max_sd)
+            found = _clean_cut(split, min_gap, max_sd) or _clean_groups(r, min_points, min_gap, max_sd)
             if found is None:
                 return None
             g = found[1]

@@ -1173,7 +1173,7 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
     ``min_contrast``."""
     import numpy as np
 
-    from .core import catenary, core_and_ring, core_ring_contrast, span_on_surface
+    from .core import _pieces_on_surfaces, catenary, core_and_ring, core_ring_contrast, span_on_surface
 
     def frame(qx, qy, qz, a, d, lo, hi, reach):
         dx, dy = qx - a[0], qy - a[1]
@@ -1211,29 +1211,6 @@ def _not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0
         if flat > 0.5 * sum(sp.n_points for sp in line_spans) or core_ring_contrast(core_n, ring_n) < min_contrast:
             out.add(li)
     return out
-
-
-def _pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
-    """The share of the span ``sp``'s own points (``s`` along its line, ``off`` across and ``dz``
-    over its curve, as for span_on_surface) that lie in pieces, cut where its points leave gaps
-    over ``gap_m``, each in a surface of its own: a short wire found along the top edges of two
-    roofs a street apart lies in neither surface over its whole length, nor at one tilt."""
-    import numpy as np
-
-    from .core import span_on_surface
-
-    own = (s >= sp.s_from) & (s <= sp.s_to) & (np.abs(off) <= lateral_m) & (np.abs(dz) <= max(3 * sp.rms, 0.15))
-    ss = np.sort(s[own])
-    if len(ss) < 2:
-        return 0.0
-    cut = np.flatnonzero(np.diff(ss) > gap_m)
-    if not len(cut):
-        return 0.0  # one piece: the whole span's test
-    on = 0
-    for lo, hi in zip(np.r_[0, cut + 1], np.r_[cut, len(ss) - 1]):
-        if ss[hi] - ss[lo] >= 1.0 and span_on_surface(s, off, dz, ss[lo], ss[hi]):
-            on += hi - lo + 1
-    return on / len(ss)
 
 
 def _drop_spans(gone, spans, geo, px, py, line_of, wire_of_pt):
@@ -1347,6 +1324,22 @@ def _select_conductors(lines: dict, keep: list) -> dict:
     return {"conductors": new_cond, "conductor_segments": seg}
 
 
+def _far_ends(lines, checks) -> list:
+    """Per line (anchor, direction), the two far ends of its checked extents (``checks``, a list
+    of (a, b)) as (position, outward direction); none for a line without extents."""
+    import numpy as np
+
+    out = []
+    for (a, d), segs in zip(lines, checks):
+        if not len(segs):
+            out.append([])
+            continue
+        pts = np.array([e for seg in segs for e in seg], float)
+        t = (pts - a) @ d
+        out.append([(pts[int(np.argmin(t))], -d), (pts[int(np.argmax(t))], d)])
+    return out
+
+
 def _circuit_ends(lines, checks, bounds, max_angle_deg: float = 1.0, across_m: float = 5.0, along_m: float = 1.0,
                   edge_m: float = 5.0) -> list:
     """Supports seen or not: where two or more parallel conductors (within ``max_angle_deg``
@@ -1357,17 +1350,8 @@ def _circuit_ends(lines, checks, bounds, max_angle_deg: float = 1.0, across_m: f
     Returns [(x, y, reach_m)], each reaching its members' ends and a metre."""
     import numpy as np
 
-    ends = []  # (line, position, outward direction)
-    for i, ((a, d), segs) in enumerate(zip(lines, checks)):
-        if not len(segs):
-            continue
-        pts = np.array([e for seg in segs for e in seg], float)
-        t = (pts - a) @ d
-        for k, sign in ((int(np.argmin(t)), -1.0), (int(np.argmax(t)), 1.0)):
-            e = pts[k]
-            if (e[0] - bounds[0] > edge_m and bounds[2] - e[0] > edge_m and e[1] - bounds[1] > edge_m
-                    and bounds[3] - e[1] > edge_m):
-                ends.append((i, e, sign * d))
+    ends = [(i, e, u) for i, line_ends in enumerate(_far_ends(lines, checks)) for e, u in line_ends
+            if bounds[0] + edge_m < e[0] < bounds[2] - edge_m and bounds[1] + edge_m < e[1] < bounds[3] - edge_m]
     cos_max = np.cos(np.radians(max_angle_deg))
     out, used = [], set()
     for k, (i, e, u) in enumerate(ends):
@@ -1398,14 +1382,7 @@ def _circuit_reach(lines, checks, max_angle_deg: float = 1.0, across_m: float = 
     import numpy as np
 
     cos_max = np.cos(np.radians(max_angle_deg))
-    far = []  # per line: (position, outward direction) of each far end
-    for (a, d), segs in zip(lines, checks):
-        if not len(segs):
-            far.append([])
-            continue
-        pts = np.array([e for seg in segs for e in seg], float)
-        t = (pts - a) @ d
-        far.append([(pts[int(np.argmin(t))], -d), (pts[int(np.argmax(t))], d)])
+    far = _far_ends(lines, checks)
     out = [list(c) for c in checks]
     for i, ends in enumerate(far):
         for e, u in ends:
