@@ -29,6 +29,7 @@ class HoughLine:
     direction: np.ndarray | None = None  # unit vector
     rms: float = 0.0
     t_range: tuple = (0.0, 0.0)  # extent of the fitted points along the line
+    v_max: float = 0.0  # the V_max its runs were validated with
 
 
 class AccumulatorTooLarge(ValueError):
@@ -73,6 +74,16 @@ def principal_axis(centred: np.ndarray) -> np.ndarray:
     return np.array([np.cos(a), np.sin(a)])
 
 
+def line_v_max(t: np.ndarray, v_max_m: float, s_min_m: float, spacings: float) -> float:
+    """V_max for the points at positions ``t`` along one line: the method's ``v_max_m``, or with
+    ``spacings`` > 0 that many median gaps between them where larger, up to ``s_min_m`` / 2 (so that
+    a run of S_min holds three points at least)."""
+    if spacings <= 0 or len(t) < 3:
+        return v_max_m
+    gap = float(np.median(np.diff(np.sort(t))))
+    return float(min(max(v_max_m, spacings * gap), max(v_max_m, s_min_m / 2)))
+
+
 def isolated_points(pts: np.ndarray, max_gap: float) -> np.ndarray:
     """Points with no other point closer than ``max_gap`` (bool per point). Along a line most
     points have a neighbour next to them in the order along the principal axis, which settles
@@ -113,7 +124,8 @@ def fit_line(px, py, max_gap: float):
 
 def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step_m: float = 0.1, band_m: float = 0.4,
                  min_votes: int = 15, s_min_m: float = 8.0, v_max_m: float = 2.5, max_lines: int = 500,
-                 max_accumulator_bytes: int = 2 << 30, fit_points: str = "band") -> list[HoughLine]:
+                 max_accumulator_bytes: int = 2 << 30, fit_points: str = "band",
+                 v_max_spacings: float = 0.0) -> list[HoughLine]:
     """Lines in points (x, y) of one tile, already shifted to a local origin (numerical range).
 
     ``new_accumulator(cos_t, sin_t, k_min, inv_drho, n_rho, extent=(x_lo, x_hi, y_lo, y_hi))``
@@ -121,6 +133,10 @@ def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step
     the box of the points, the only ones voted.
     ``fit_points``: "inverse" refits each line on its inverse-Hough points (the paper's choice,
     quantised to the ρ bin), "band" on the points within ±band_m (sharper).
+    ``v_max_spacings`` > 0: a peak validated by the method has its runs taken with a V_max of at
+    least that many times the median gap between its inverse-Hough points, up to S_min / 2 (a
+    sparse wire among dense ones: an earth wire over a stack seen from the street, validated in
+    stretches); 0: the method's fixed V_max.
     """
     x = np.asarray(x, np.float64)
     y = np.asarray(y, np.float64)
@@ -138,11 +154,11 @@ def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step
                          extent=(float(x.min()), float(x.max()), float(y.min()), float(y.max()))) as acc:
         acc.vote(x, y, 1)
         return _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, band_m=band_m, min_votes=min_votes, s_min_m=s_min_m, v_max_m=v_max_m,
-                              max_lines=max_lines, fit_points=fit_points)
+                              max_lines=max_lines, fit_points=fit_points, v_max_spacings=v_max_spacings)
 
 
 def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m, min_votes, s_min_m,
-                   v_max_m, max_lines, fit_points) -> list[HoughLine]:
+                   v_max_m, max_lines, fit_points, v_max_spacings: float = 0.0) -> list[HoughLine]:
     """The method's iterative peak extraction: take the largest cell, validate its inverse-Hough
     points, subtract the band's votes, until the largest cell is below ``min_votes``."""
     bin_cs, bin_ss, bin_off = bin_scales(cos_t, sin_t, k_min, 1.0 / rho_step_m)
@@ -161,18 +177,24 @@ def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m
         # along-line positions: t = -x sinθ + y cosθ
         t_inv = -x[inverse] * sin_t[c] + y[inverse] * cos_t[c]
         runs = runs_along(t_inv, v_max_m, s_min_m)
+        v_line = v_max_m
+        if runs and v_max_spacings:
+            # a line the method validates runs on at its own points' spacing: a sparse wire's
+            # stretches join across its longer gaps
+            v_line = line_v_max(t_inv, v_max_m, s_min_m, v_max_spacings)
+            runs = runs_along(t_inv, v_line, s_min_m)
         if runs:
             members = band if fit_points == "band" else inverse
             # only the points of the validated runs are the conductor
             t_mem = -x[members] * sin_t[c] + y[members] * cos_t[c]
             on_run = np.zeros(len(members), bool)
             for a, b in runs:
-                on_run |= (t_mem >= a - v_max_m) & (t_mem <= b + v_max_m)
+                on_run |= (t_mem >= a - v_line) & (t_mem <= b + v_line)
             members = members[on_run]
-            anchor, direction, rms = fit_line(x[members], y[members], v_max_m)
+            anchor, direction, rms = fit_line(x[members], y[members], v_line)
             tt = (np.column_stack([x[members], y[members]]) - anchor) @ direction
             lines.append(HoughLine(rho_p, float(np.degrees(thetas[c])), votes, members, runs, anchor, direction, rms,
-                                   (float(tt.min()), float(tt.max()))))
+                                   (float(tt.min()), float(tt.max())), v_line))
         # subtract the band's votes (also for a rejected peak, so that the next one comes up)
         if len(band) == 0:
             acc.clear_cell(c, r)  # numerically isolated cell: clear it
@@ -205,6 +227,7 @@ class Conductor:
     rms: float
     t_range: tuple
     segments: list  # [(a, b)] world coordinates
+    v_max: float = 0.0  # the V_max its runs were validated with
 
 
 def tiles(x, y, size: float, overlap: float):
@@ -242,7 +265,7 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
         idx = np.flatnonzero(m)
         for L in detect_lines(x[idx] - x0, y[idx] - y0, new_accumulator, **kw):
             found.append(Conductor(L.anchor + (x0, y0), L.direction, idx[L.members], L.votes, L.rms,
-                                   L.t_range, []))
+                                   L.t_range, [], L.v_max))
     # merge collinear pieces (union-find over pairs)
     parent = list(range(len(found)))
 
@@ -277,7 +300,7 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
             final.append(g)
             continue
         members = np.unique(np.concatenate([found[i].members for i in g]))
-        anchor, direction, rms = fit_line(x[members], y[members], v_max)
+        anchor, direction, rms = fit_line(x[members], y[members], max(v_max, *(found[i].v_max for i in g)))
         if rms <= merge_offset_m:
             final.append(g)
             continue
@@ -292,7 +315,8 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
             continue
         todo += [[g[k] for k in order[:cut + 1]], [g[k] for k in order[cut + 1:]]]
     out = [c for c in (_refit(x, y, np.unique(np.concatenate([found[i].members for i in g])),
-                              int(sum(found[i].votes for i in g)), v_max, s_min) for g in final) if c is not None]
+                              int(sum(found[i].votes for i in g)), max(v_max, *(found[i].v_max for i in g)), s_min)
+                       for g in final) if c is not None]
     return merge_pieces_on_lines(out, x, y, v_max, s_min, merge_angle_deg, merge_offset_m, merge_gap_m)
 
 
@@ -309,7 +333,8 @@ def _refit(x, y, members, votes: int, v_max: float, s_min: float):
     t = (np.column_stack([x[members], y[members]]) - anchor) @ direction
     runs = runs_along(t, v_max, s_min)
     segs = [(anchor + a * direction, anchor + b * direction) for a, b in runs]
-    return Conductor(anchor, direction, members, votes, rms, (float(t.min()), float(t.max())), segs) if runs else None
+    return Conductor(anchor, direction, members, votes, rms, (float(t.min()), float(t.max())), segs,
+                     v_max) if runs else None
 
 
 def merge_pieces_on_lines(lines, x, y, v_max: float, s_min: float, merge_angle_deg: float = 1.0,
@@ -332,7 +357,8 @@ def merge_pieces_on_lines(lines, x, y, v_max: float, s_min: float, merge_angle_d
             if any(abs(float((b.anchor + t * b.direction - a.anchor) @ nrm)) > merge_offset_m for t in b.t_range) or \
                     _apart_along(a, b, merge_gap_m):
                 continue
-            both = _refit(x, y, np.unique(np.r_[a.members, b.members]), a.votes + b.votes, v_max, s_min)
+            both = _refit(x, y, np.unique(np.r_[a.members, b.members]), a.votes + b.votes,
+                          max(v_max, a.v_max, b.v_max), s_min)
             if both is not None and both.rms <= merge_offset_m:
                 out = [c for k, c in enumerate(out) if k not in (i, j)] + [both]
                 merged = True

@@ -31,6 +31,28 @@ MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense 
 DENSITY_BLOCK_M = 5.0  # the density's window moves in blocks of this size (cells of 1 m inside)
 
 
+def height_window_top(hag, xyz, quantile: float = 99.95, link_m: float = 2.5, min_links: int = 2) -> float:
+    """Highest height above ground the candidates reach, birds and lone returns left out.
+
+    Above the 99.95th percentile of ``hag`` only points with ``min_links`` others within ``link_m``
+    (3D, the method's V_max: a wire's run) count: an earth wire over a stack is fewer points than the
+    percentile leaves out, but each point of it has neighbours along it, as a tower top has.
+    """
+    hag = np.asarray(hag, float)
+    if not len(hag):
+        return 12.0
+    top = float(np.percentile(hag, quantile))
+    near = np.flatnonzero(hag >= top - link_m)  # the points above it and what links them from below
+    high = hag[near] > top
+    if high.any():
+        tree = cKDTree(xyz[near])
+        links = tree.query_ball_point(xyz[near[high]], link_m, return_length=True) - 1
+        linked = hag[near[high]][links >= min_links]
+        if len(linked):
+            top = max(top, float(linked.max()))
+    return top + 1.0
+
+
 def local_surface_density(x, y, weight=None, radius_m: float = 200.0, cell_m: float = 1.0,
                           block_m: float = DENSITY_BLOCK_M) -> np.ndarray:
     """Per point: the points (``weight``: those that count, e.g. first returns) per occupied

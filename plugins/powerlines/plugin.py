@@ -31,7 +31,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import (grow_span_ends, in_foliage, local_surface_density, off_their_spans, points_on_spans,
+    from .core import (grow_span_ends, height_window_top, in_foliage, local_surface_density, off_their_spans, points_on_spans,
                        shape_classes, wire_point_spacing)
 
     pc = inputs["points"]
@@ -53,9 +53,10 @@ def _run(inputs, params, ctx):
     t = time.perf_counter()
     cand = hag >= params["height_min_m"]
     h_max = params["height_max_m"]
-    if h_max is None:  # automatic: everything above the window's floor, minus the topmost outliers
-        above = hag[cand]
-        h_max = float(np.percentile(above, 99.95)) + 1.0 if len(above) else 12.0
+    if h_max is None:  # automatic: everything above the window's floor, birds and lone returns left out
+        above = np.flatnonzero(cand)
+        h_max = height_window_top(hag[above], np.column_stack([pc.x[above] * hu, pc.y[above] * hu,
+                                                               pc.z[above] * vu]), link_m=V_MAX_METHOD_M)
     cand &= hag <= h_max
     rn = pc.fields.get("return_number")
     if params["first_returns_only"] and rn is not None and np.any(rn > 0):
@@ -81,7 +82,7 @@ def _run(inputs, params, ctx):
     # top-hat throws the wires away (AHN4's side-by-side conductors at the method's 0.5 m)
     cell_used = params["cell_size_m"] if params["cell_size_m"] is not None else round(params["band_m"] / 3, 3)
     v_max_auto = params["v_max_m"] is None
-    params = dict(params, v_max_m=V_MAX_METHOD_M if v_max_auto else params["v_max_m"])
+    params = dict(params, v_max_m=V_MAX_METHOD_M if v_max_auto else params["v_max_m"], v_max_auto=v_max_auto)
     lines, geo, spans, line_of, wire_of_pt, n_th = _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings)
     spacing = wire_point_spacing(spans, geo, pc.x[keep] * hu, pc.y[keep] * hu, line_of, wire_of_pt,
                                  params["max_rms_3d_m"], 2 * params["v_max_m"])
@@ -827,7 +828,11 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     hp = {k: params[k] for k in ("theta_step_deg", "rho_step_m", "band_m", "min_votes", "s_min_m", "v_max_m",
                                  "tile_size_m", "overlap_m", "merge_gap_m", "fit_points", "crossing_validation")}
     # its crossings are numbered over lines the 3D step may drop: they are computed once at the end
-    found = ctx.call("hough-lines", {"points": th}, **hp).outputs["lines"]
+    # with V_max automatic, the second pass (the wire-like points no first-pass wire took) takes a
+    # validated line's runs at its own points' spacing: a wire much sparser than the rest (an earth
+    # wire high over a stack seen from the street) is seen in stretches too short for the 3D step
+    sparse = GAP_SPACINGS if params["v_max_auto"] and min_fit_share else 0.0
+    found = ctx.call("hough-lines", {"points": th}, v_max_spacings=sparse, **hp).outputs["lines"]
     lines = {k: found[k] for k in ("conductors", "conductor_segments")}
     timings["hough_s"] = timings.get("hough_s", 0.0) + time.perf_counter() - t
     # wires along each 2D line, split by height and continuity, a catenary per span
@@ -1522,7 +1527,7 @@ def toolbox_algorithms():
                       unit="m", minimum=0.0, maximum=500.0),
             Parameter("height_max_m", float, None, "highest candidate height above ground; the method's 12 m suits "
                       "distribution lines, transmission lines sit at 10-60 m; auto: up to the highest points "
-                      "(99.95th percentile)", unit="m", minimum=0.0, maximum=1000.0, allow_auto=True),
+                      "(above the 99.95th percentile, those with two others within 2.5 m)", unit="m", minimum=0.0, maximum=1000.0, allow_auto=True),
             Parameter("first_returns_only", bool, True, "keep first returns only (ignored when the file has no return numbers)"),
             Parameter("density_radius_m", float, 200.0, "surface density (first returns per occupied m²) measured "
                       "around each candidate within this radius: a roof or crown neighbourhood must hold half of it "
