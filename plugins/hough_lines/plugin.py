@@ -74,7 +74,8 @@ def layers(conductors, x, y, crs, extra=None, validation: str = "extent"):
         a = c.anchor + c.t_range[0] * c.direction
         b = c.anchor + c.t_range[1] * c.direction
         row = {"conductor": i, "votes": c.votes, "n_points": int(len(c.members)), "length_m": float(np.linalg.norm(b - a)),
-               "rms_m": c.rms, "azimuth_deg": float(np.degrees(np.arctan2(c.direction[0], c.direction[1])) % 180.0)}
+               "rms_m": c.rms, "azimuth_deg": float(np.degrees(np.arctan2(c.direction[0], c.direction[1])) % 180.0),
+               "v_max_m": c.v_max}
         if extra:
             row.update(extra(i, c))
         rows.append(row)

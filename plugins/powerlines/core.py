@@ -2365,10 +2365,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     (degrees, counter-clockwise from east, 0-180).
 
     On a ``cell_m`` grid of the points within ``reach_m`` of a conductor line, a cell is *tall*
-    when its highest point reaches ``top_share`` of the nearest span end's height within
-    ``end_radius_m`` (a tower stands as high as the attachment it holds there; a tree with no
-    span ending at it is never tall, nor is a pole measured against another line's wires passing
-    over it or ending near it), and a *column* when
+    when its highest point reaches ``top_share`` of the lowest span end's height within
+    ``end_radius_m`` (a tower stands as high as the lowest attachment it holds there, and its
+    peak, over the middle of its body, holds the earth wire; a tree with no span ending at it is
+    never tall), and a *column* when
     its points fill at least ``column_share`` of the 1 m layers from its top down to 3 m above
     ground (a lattice or a pole, not an arm or a crown). Tall cells join into candidates (8-
     connected); a candidate with a column, at most ``max_side_m`` across, where at least
@@ -2409,9 +2409,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     span_end_hag = np.asarray(span_end_hag, float)
     ends = cKDTree(np.asarray(span_ends, float))
     idx = np.flatnonzero(has)
-    d_near, j_near = ends.query(centres[idx], distance_upper_bound=end_radius_m)
-    hit = np.isfinite(d_near)
-    wire_top[idx[hit]] = span_end_hag[j_near[hit]]
+    # the lowest span end around: the earth wire's end over a lattice tower's peak is nearer its
+    # middle cells than the phases' ends at its arms, and only the peak reaches that high
+    for i, near in zip(idx, ends.query_ball_point(centres[idx], end_radius_m)):
+        if near:
+            wire_top[i] = span_end_hag[near].min()
     tall = has & (wire_top > 0) & (top >= top_share * wire_top)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
     structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms

@@ -12,6 +12,8 @@ from toolbox import Algorithm, DataError, Input, LayerMerge, Output, Parameter
 # surveys as dense or denser keep the method's value and sparser ones scale it
 V_MAX_METHOD_M = 2.5
 GAP_SPACINGS = 10.0
+STANDS_CLEAR_MAX = 0.5  # other points within 0.5 m of a sparse second-pass wire's points, on average
+SETTLE_DRIFT_M = 0.02  # a plan line's drift off its wires' trend that its output is turned for
 # a tower found this close to a pole is the pole's (its span ends and a crown beside it)
 POLE_TAKES_M = 6.0
 # how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
@@ -324,6 +326,11 @@ def _run(inputs, params, ctx):
     lines, geo, spans, conductor_of, wire_of_input, n_side = _side_by_side(lines, geo, spans, conductor_of,
                                                                            wire_of_input, pc.x * hu, pc.y * hu,
                                                                            params, hu)
+    # the plan layers (and so the crossings) settle on their wires' own trend where it drifts off
+    # the line by more than the crossings' tolerance: a short line seen from one side, leant by the
+    # points of a line crossing it in its band (the 3D step told those apart by height). The 3D
+    # layer keeps the frame its spans were fitted in
+    lines = _realign(lines, geo, spans, params, hu, min_drift_m=SETTLE_DRIFT_M)[0]
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
@@ -880,6 +887,22 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"]
             and sp.offset_rms <= WIRE_LATERAL_RMS_M
             and abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
+    if sparse and "v_max_m" in lines["conductors"].columns:
+        # a line validated only at its own spacing is a wire standing clear in the air (an earth
+        # wire over its stack), not rows of a sparse roof or crown far from the scanner
+        from scipy.spatial import cKDTree
+        wide = np.flatnonzero(lines["conductors"]["v_max_m"].to_numpy() * hu > params["v_max_m"] + 1e-9)
+        if len(wide):
+            around = np.flatnonzero(np.isfinite(hag) & (hag >= params["height_min_m"]))
+            tree = cKDTree(np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]))
+            for li in wide:
+                own = keep[line_of == li]
+                if not len(own):
+                    continue
+                q = np.column_stack([pc.x[own] * hu, pc.y[own] * hu, pc.z[own] * vu])
+                n = tree.query_ball_point(q, 0.5, return_length=True) - cKDTree(q).query_ball_point(q, 0.5, return_length=True)
+                if float(np.mean(n)) > STANDS_CLEAR_MAX:
+                    good.discard(int(li))
     if min_fit_share:  # and most of what its spans hold fits them
         tot, fit = np.zeros(len(geo)), np.zeros(len(geo))
         for sp in spans:
@@ -975,7 +998,7 @@ def _plan_trends(spans, params) -> dict:
     return out
 
 
-def _realign(lines, geo, spans, params, hu):
+def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None):
     """Lines turned onto the plan trend of their wires: the Hough's line through a wire seen from
     one side (a mobile scanner's view of a line crossing its street) can lean off it by a few
     tenths of a degree, a drift across its length that its band and its crossings inherit. The
@@ -984,13 +1007,15 @@ def _realign(lines, geo, spans, params, hu):
     spans where that trend drifts more than band_m over the line's length (its band loses the
     wire at one end), lies more than three standard errors off zero and its spans agree on it
     (a line bending at a support, or wires fanning out from a pole, keep the Hough's compromise).
-    Returns (lines, geo, number turned)."""
+    ``min_drift_m``: the drift that turns a line (default band_m). Returns (lines, geo, number
+    turned)."""
     import numpy as np
     from shapely.geometry import LineString
 
     turn = {}
     for li, (trend, agree, w, mid, off, n) in _plan_trends(spans, params).items():
-        if abs(trend) * (geo[li][3] - geo[li][2]) > params["band_m"] and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
+        drift = params["band_m"] if min_drift_m is None else min_drift_m
+        if abs(trend) * (geo[li][3] - geo[li][2]) > drift and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
             pivot = float(w @ mid / w.sum())
             # the line moves onto its wire there: the offset most of its points share (another
             # line's wire its lean let into the band is out-numbered)
