@@ -326,11 +326,12 @@ def _run(inputs, params, ctx):
     lines, geo, spans, conductor_of, wire_of_input, n_side = _side_by_side(lines, geo, spans, conductor_of,
                                                                            wire_of_input, pc.x * hu, pc.y * hu,
                                                                            params, hu)
-    # the plan layers (and so the crossings) settle on their wires' own trend where it drifts off
-    # the line by more than the crossings' tolerance: a short line seen from one side, leant by the
-    # points of a line crossing it in its band (the 3D step told those apart by height). The 3D
-    # layer keeps the frame its spans were fitted in
-    lines = _realign(lines, geo, spans, params, hu, min_drift_m=SETTLE_DRIFT_M)[0]
+    # the plan layers (and so the crossings) of a line one span holds settle on that span's trend
+    # where it drifts off the line by more than the crossings' tolerance: a wire seen over one
+    # stretch from one side, leant by the points of a line crossing it in its band (the 3D step
+    # told those apart by height). Over several spans the Hough's fit is as good, and their pooled
+    # trends turned ribbons' and bundles' lines the wrong way. The 3D layer keeps its frame
+    lines = _realign(lines, geo, spans, params, hu, min_drift_m=SETTLE_DRIFT_M, max_spans=1)[0]
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
@@ -998,7 +999,7 @@ def _plan_trends(spans, params) -> dict:
     return out
 
 
-def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None):
+def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None, max_spans: int | None = None):
     """Lines turned onto the plan trend of their wires: the Hough's line through a wire seen from
     one side (a mobile scanner's view of a line crossing its street) can lean off it by a few
     tenths of a degree, a drift across its length that its band and its crossings inherit. The
@@ -1007,14 +1008,16 @@ def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None):
     spans where that trend drifts more than band_m over the line's length (its band loses the
     wire at one end), lies more than three standard errors off zero and its spans agree on it
     (a line bending at a support, or wires fanning out from a pole, keep the Hough's compromise).
-    ``min_drift_m``: the drift that turns a line (default band_m). Returns (lines, geo, number
-    turned)."""
+    ``min_drift_m``: the drift that turns a line (default band_m); ``max_spans``: only lines held
+    by at most that many such spans. Returns (lines, geo, number turned)."""
     import numpy as np
     from shapely.geometry import LineString
 
     turn = {}
     for li, (trend, agree, w, mid, off, n) in _plan_trends(spans, params).items():
         drift = params["band_m"] if min_drift_m is None else min_drift_m
+        if max_spans is not None and len(w) > max_spans:
+            continue
         if abs(trend) * (geo[li][3] - geo[li][2]) > drift and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
             pivot = float(w @ mid / w.sum())
             # the line moves onto its wire there: the offset most of its points share (another
