@@ -300,7 +300,7 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
             final.append(g)
             continue
         members = np.unique(np.concatenate([found[i].members for i in g]))
-        anchor, direction, rms = fit_line(x[members], y[members], max(v_max, *(found[i].v_max for i in g)))
+        anchor, direction, rms = fit_line(x[members], y[members], _group_v_max(found, g, v_max))
         if rms <= merge_offset_m:
             final.append(g)
             continue
@@ -315,9 +315,14 @@ def detect_tiled(x, y, new_accumulator, *, tile_size_m: float = 100.0, overlap_m
             continue
         todo += [[g[k] for k in order[:cut + 1]], [g[k] for k in order[cut + 1:]]]
     out = [c for c in (_refit(x, y, np.unique(np.concatenate([found[i].members for i in g])),
-                              int(sum(found[i].votes for i in g)), max(v_max, *(found[i].v_max for i in g)), s_min)
+                              int(sum(found[i].votes for i in g)), _group_v_max(found, g, v_max), s_min)
                        for g in final) if c is not None]
     return merge_pieces_on_lines(out, x, y, v_max, s_min, merge_angle_deg, merge_offset_m, merge_gap_m)
+
+
+def _group_v_max(found, group, v_max: float) -> float:
+    """The V_max of merged pieces: the widest any of them was validated with."""
+    return max([v_max] + [found[i].v_max for i in group])
 
 
 def _apart_along(a, b, gap_m: float) -> bool:

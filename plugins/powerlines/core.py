@@ -2411,9 +2411,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     idx = np.flatnonzero(has)
     # the lowest span end around: the earth wire's end over a lattice tower's peak is nearer its
     # middle cells than the phases' ends at its arms, and only the peak reaches that high
-    for i, near in zip(idx, ends.query_ball_point(centres[idx], end_radius_m)):
-        if near:
-            wire_top[i] = span_end_hag[near].min()
+    pairs = cKDTree(centres[idx]).sparse_distance_matrix(ends, end_radius_m, output_type="ndarray")
+    lowest = np.full(len(idx), np.inf)
+    np.minimum.at(lowest, pairs["i"], span_end_hag[pairs["j"]])
+    hit = np.isfinite(lowest)
+    wire_top[idx[hit]] = lowest[hit]
     tall = has & (wire_top > 0) & (top >= top_share * wire_top)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
     structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms

@@ -888,22 +888,11 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"]
             and sp.offset_rms <= WIRE_LATERAL_RMS_M
             and abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
-    if sparse and "v_max_m" in lines["conductors"].columns:
+    if sparse and len(lines["conductors"]):  # (an empty layer has no columns)
         # a line validated only at its own spacing is a wire standing clear in the air (an earth
         # wire over its stack), not rows of a sparse roof or crown far from the scanner
-        from scipy.spatial import cKDTree
         wide = np.flatnonzero(lines["conductors"]["v_max_m"].to_numpy() * hu > params["v_max_m"] + 1e-9)
-        if len(wide):
-            around = np.flatnonzero(np.isfinite(hag) & (hag >= params["height_min_m"]))
-            tree = cKDTree(np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]))
-            for li in wide:
-                own = keep[line_of == li]
-                if not len(own):
-                    continue
-                q = np.column_stack([pc.x[own] * hu, pc.y[own] * hu, pc.z[own] * vu])
-                n = tree.query_ball_point(q, 0.5, return_length=True) - cKDTree(q).query_ball_point(q, 0.5, return_length=True)
-                if float(np.mean(n)) > STANDS_CLEAR_MAX:
-                    good.discard(int(li))
+        good -= {int(li) for li in wide if not _stands_clear_of(pc, hag, keep[line_of == li], params["height_min_m"])}
     if min_fit_share:  # and most of what its spans hold fits them
         tot, fit = np.zeros(len(geo)), np.zeros(len(geo))
         for sp in spans:
@@ -914,6 +903,26 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         lines, geo, spans, line_of, wire_of_pt = _keep_conductors(sorted(good), lines, geo, spans, line_of, wire_of_pt)
     timings["conductors_3d_s"] = timings.get("conductors_3d_s", 0.0) + time.perf_counter() - t
     return lines, geo, spans, line_of, wire_of_pt, len(th)
+
+
+def _stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) -> bool:
+    """Whether the points ``own`` (indices into ``pc``) have on average at most STANDS_CLEAR_MAX
+    other points above ``height_min_m`` within ``radius_m`` (core._stands_clear, on the points
+    around them)."""
+    import numpy as np
+
+    from .core import _stands_clear
+
+    if not len(own):
+        return True
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    x, y = pc.x * hu, pc.y * hu
+    lo_x, hi_x, lo_y, hi_y = x[own].min() - radius_m, x[own].max() + radius_m, y[own].min() - radius_m, \
+        y[own].max() + radius_m
+    around = np.flatnonzero((x >= lo_x) & (x <= hi_x) & (y >= lo_y) & (y <= hi_y) & (hag >= height_min_m))
+    around = np.union1d(around, own)
+    xyz = np.column_stack([x[around], y[around], pc.z[around] * vu])
+    return _stands_clear(xyz, np.searchsorted(around, own), radius_m, STANDS_CLEAR_MAX)
 
 
 def _merge_twins(lines, geo, pairs, hu):
@@ -1014,8 +1023,8 @@ def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None, ma
     from shapely.geometry import LineString
 
     turn = {}
+    drift = params["band_m"] if min_drift_m is None else min_drift_m
     for li, (trend, agree, w, mid, off, n) in _plan_trends(spans, params).items():
-        drift = params["band_m"] if min_drift_m is None else min_drift_m
         if max_spans is not None and len(w) > max_spans:
             continue
         if abs(trend) * (geo[li][3] - geo[li][2]) > drift and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
