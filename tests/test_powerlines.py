@@ -1735,6 +1735,52 @@ def test_crown_points_a_span_took_as_its_own_are_foliage_and_wires_beside_walls_
     assert not in_foliage([sp], lines, pts[:, 0], pts[:, 1], pts[:, 2], one, one, 0.001, around).any()
 
 
+def test_a_line_on_a_crowns_top_is_a_surface_a_wire_along_one_or_in_a_stack_is_not():
+    """The top of a crown (a ridge curving down 0.04 m within 0.5 m across, a point per 0.1 m)
+    taken as a line: its points lie in the surface, as dense 0.2-0.5 m around their catenary as a
+    surface is (contrast about 7). A wire in free space, a wire of 20 points per metre lying on such
+    a surface, and four wires 0.3 m apart in a square (each in the others' ring, and they are left
+    out) are wires."""
+    from toolbox_plugins.powerlines.core import SURFACE_CONTRAST, WIRE_ID_BASE, _span, in_a_surface
+
+    rng = np.random.default_rng(3)
+    g_s, g_o = np.meshgrid(np.arange(0.0, 30.0, 0.1), np.arange(-1.5, 1.5, 0.1))
+    g_s, g_o = g_s.ravel() + rng.uniform(-0.03, 0.03, g_s.size), g_o.ravel() + rng.uniform(-0.03, 0.03, g_s.size)
+
+    def ridge(y0, z_top):  # a crown's top along the line at offset y0, its ridge on a catenary
+        z = z_top + catenary(g_s, 0.0, 15.0, 300.0) - (g_o ** 2) / 6.0 + rng.normal(0, 0.01, g_s.size)
+        return np.column_stack([g_s, y0 + g_o, z])
+
+    def wire(y0, z_top, step=0.05):
+        s = np.arange(0.0, 30.0, step)
+        return np.column_stack([s, y0 + rng.normal(0, 0.01, len(s)), z_top + catenary(s, 0.0, 15.0, 300.0)
+                                + rng.normal(0, 0.01, len(s))])
+
+    crown = ridge(0.0, 10.0)
+    wires = {0: crown[np.abs(crown[:, 1]) <= 0.05],  # line 0: the crown's top row
+             1: wire(10.0, 10.0)}  # line 1: a wire in free space
+    crown2 = ridge(20.0, 10.0)
+    wires[2] = wire(20.0, 10.0)  # line 2: a wire lying along a crown's top
+    square = [wire(30.0 + dy, 10.0 + dz, 0.1) for dy, dz in ((0, 0), (0.3, 0), (0, 0.3), (0.3, 0.3))]
+    lines, spans, pts, line_of, wire_of = [], [], [], [], []
+    for li, w in [(0, wires[0]), (1, wires[1]), (2, wires[2])] + [(3, q) for q in square]:
+        if li == len(lines):
+            lines.append((np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 30.0))  # x along, y across
+        k = len([sp for sp in spans if sp.conductor == li])
+        spans.append(_span(li, k, 0, w[:, 0], w[:, 1], fit_catenary(w[:, 0], w[:, 2]), z=w[:, 2]))
+        pts.append(w), line_of.append(np.full(len(w), li)), wire_of.append(np.full(len(w), k))
+    pts, line_of, wire_of = np.vstack(pts), np.concatenate(line_of), np.concatenate(wire_of)
+    shared = np.abs(crown[:, 1]) <= 0.05  # the crown's row is both a line's points and the crown's
+    around = np.vstack([pts, crown[~shared], crown2])
+    around_wire = np.r_[line_of * WIRE_ID_BASE + wire_of, np.full(len(around) - len(pts), -1)]
+    args = (spans, lines, pts[:, 0], pts[:, 1], pts[:, 2], line_of, wire_of, 0.2)
+    assert in_a_surface(*args, around, around_wire) == {0}
+    assert SURFACE_CONTRAST > 7.0  # a surface alone gives 7: the threshold lies above it
+    # the square's wires in one another's ring, counted as clutter: a surface too
+    assert 3 in in_a_surface(*args, around, np.r_[np.where(line_of == 3, -1, line_of * WIRE_ID_BASE + wire_of),
+                                                  np.full(len(around) - len(pts), -1)])
+
+
 @pytest.mark.parametrize("pieces, turned", [
     # (from, to, points, lateral rms, offset slope): one wire seen in three spans, 0.6 m of drift
     ([(0, 60, 300, 0.03, -0.006), (60, 80, 60, 0.03, -0.006), (80, 100, 40, 0.05, -0.006)], True),
@@ -2446,6 +2492,24 @@ def test_a_sparse_earth_wire_over_a_stack_seen_from_the_street_is_found(tmp_path
     xy = np.column_stack([cr.geometry.x, cr.geometry.y])
     assert len(cr) == len(truth["crossings"]) == 15 and false_crossings(xy, truth) == 0
     assert max(crossing_errors(xy, truth)) <= 0.05
+
+
+def test_two_crowns_tops_lined_up_are_no_conductor(tmp_path):
+    """A mobile double circuit (seed 7): the tops of two dome crowns beside the road lie on one
+    10 m line that fits a catenary and has nothing above it (one false conductor, P 0.996). Its
+    points lie in the crowns' surface: the line is dropped, and the eight conductors stay."""
+    path = tmp_path / "m.laz"
+    toolbox.run("synthetic-scene", output=path, kind="corridor", seed=7, scanner="mobile", density_ppm2=200.0,
+                width_m=300.0, height_m=120.0)
+    truth = json.loads(path.with_name("m_truth.json").read_text())
+    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": tmp_path / "c.laz"})
+    assert rep["stats"]["n_surface_lines"] >= 1
+    cond = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors")
+    hits = conductor_hits(cond, truth)
+    assert len({k for k, _ in hits}) == len(truth["conductor_lines_2d"]) == 8 and len(cond) == 8
+    t = np.asarray(laspy.read(path).classification) == 14
+    p = np.asarray(laspy.read(tmp_path / "c.laz").classification) == 14
+    assert (t & p).sum() / p.sum() >= 0.998 and (t & p).sum() / t.sum() >= 0.99
 
 
 def test_a_wire_seen_from_one_side_gets_its_own_heading(tmp_path):

@@ -293,6 +293,10 @@ WIRE_HEIGHT_RMS_M = 0.08
 WIDE_GAP_LINKS = 5.0
 # the radius within which a sparse wire has no other point of its band (its own points aside)
 ISOLATION_M = 0.5
+# a wire's id over all lines: line * WIRE_ID_BASE + wire
+WIRE_ID_BASE = 1 << 20
+# below this core-to-ring contrast (1.5 times a surface's 7) a line's points are a surface's
+SURFACE_CONTRAST = 10.5
 # how many of a set's best-supported lines (through distinct points) straight_wires tries before
 # it leaves the set: a cross arm or a pole top's several angles come before a wire beside them
 N_BEST_LINES = 5
@@ -1962,17 +1966,8 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
                                                                   window_m + 0.5)).astype(np.int64))
             q = around_xyz[near]
 
-            def frame(x, y, z):  # position along, and offset across / up from the span there
-                dx, dy = x - anchor[0], y - anchor[1]
-                s, off = dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0]
-                lat, dz = np.full(len(s), np.inf), np.full(len(s), np.inf)
-                for sp in wire_spans:
-                    at = (s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m)
-                    h = np.where(at, z - catenary(s, sp.z0, sp.s0, sp.c), np.inf)
-                    nearer = np.abs(h) < np.abs(dz)
-                    dz[nearer] = h[nearer]
-                    lat[nearer] = (off - sp.offset - sp.offset_slope * s)[nearer]
-                return s, lat, dz
+            def frame(x, y, z):
+                return _span_frame(x, y, z, anchor, direction, wire_spans, margin_m)
 
             s_q, lat_q, dz_q = frame(q[:, 0], q[:, 1], q[:, 2])
             ok = np.isfinite(dz_q)
@@ -1993,6 +1988,56 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
             sides = (c[:, 1:] > 0).sum(axis=1)
             foliage[m] = np.isfinite(dz_m) & (contrast < min_contrast) & (sides >= min_sides)
     return foliage
+
+
+def _span_frame(x, y, z, anchor, direction, wire_spans, margin_m: float):
+    """Points' position along a line, and their offset across and up from the nearest (in
+    height) of a wire's spans there (inf where none reaches within ``margin_m``)."""
+    dx, dy = x - anchor[0], y - anchor[1]
+    s, off = dx * direction[0] + dy * direction[1], -dx * direction[1] + dy * direction[0]
+    lat, dz = np.full(len(s), np.inf), np.full(len(s), np.inf)
+    for sp in wire_spans:
+        at = (s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m)
+        h = np.where(at, z - catenary(s, sp.z0, sp.s0, sp.c), np.inf)
+        nearer = np.abs(h) < np.abs(dz)
+        dz[nearer] = h[nearer]
+        lat[nearer] = (off - sp.offset - sp.offset_slope * s)[nearer]
+    return s, lat, dz
+
+
+def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, around_wire,
+                 min_contrast: float = SURFACE_CONTRAST, reach_m: float = 1.5, margin_m: float = 0.5) -> set:
+    """Lines (indices into ``lines``) whose wires lie in a surface, not in free space: pooled
+    over the line's wires, the points ``around_xyz`` (all those off the ground) are within 0.1 m
+    of each wire's spans less than ``min_contrast`` times as dense as 0.2-0.5 m around them
+    (``core_ring_contrast``). Other wires' points are left out (``around_wire``: each point's
+    wire as ``line * WIRE_ID_BASE + wire``, -1 for none): a stack's wires sit in one another's
+    ring. A surface through the curve alone gives 7 (its trace crosses the ring three times as
+    far as the core); a wire lying along one, half again that or more. The tops of crowns lined
+    up in the Hough fit a catenary and pass ``in_foliage`` (nothing above them); a real wire
+    through a crown is in it over a few stretches only. ``px, py, pz, line_of, wire_of``: the
+    wire points, as for ``in_foliage``."""
+    out = set()
+    if not len(around_xyz) or not (line_of >= 0).any():
+        return out
+    tree = cKDTree(around_xyz)
+    for li in np.unique(line_of[line_of >= 0]):
+        anchor, direction, _, _ = lines[li]
+        core_n = ring_n = 0
+        for wire in np.unique(wire_of[line_of == li]):
+            wire_spans = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms <= max_rms]
+            if not wire_spans:
+                continue
+            m = np.flatnonzero((line_of == li) & (wire_of == wire))
+            near = np.unique(np.concatenate(tree.query_ball_point(np.column_stack([px[m], py[m], pz[m]]),
+                                                                  reach_m)).astype(np.int64))
+            near = near[(around_wire[near] < 0) | (around_wire[near] == li * WIRE_ID_BASE + wire)]
+            _, lat, dz = _span_frame(*around_xyz[near].T, anchor, direction, wire_spans, margin_m)
+            core, ring = core_and_ring(np.hypot(lat, dz)[np.isfinite(dz)])
+            core_n, ring_n = core_n + core, ring_n + ring
+        if core_n + ring_n and core_ring_contrast(core_n, ring_n) < min_contrast:
+            out.add(int(li))
+    return out
 
 
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):

@@ -33,7 +33,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import (grow_span_ends, height_window_top, in_foliage, local_surface_density, off_their_spans, points_on_spans,
+    from .core import (WIRE_ID_BASE, grow_span_ends, height_window_top, in_a_surface, in_foliage, local_surface_density, off_their_spans, points_on_spans,
                        shape_classes, wire_point_spacing)
 
     pc = inputs["points"]
@@ -318,7 +318,16 @@ def _run(inputs, params, ctx):
     foliage = wire_pt[in_foliage(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
                                  conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
                                  np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]))]
+    # a line whose points lie in a surface (the tops of crowns, a roof's rows) is none
+    around_wire = np.where(conductor_of[around] >= 0, conductor_of[around] * WIRE_ID_BASE + wire_of_input[around], -1)
+    surfaces = in_a_surface(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
+                            conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
+                            np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]), around_wire)
     conductor_of[foliage] = -1
+    if surfaces:
+        kept = [i for i in range(len(geo)) if i not in surfaces]
+        lines, geo, spans, conductor_of, wire_of_input = _keep_conductors(kept, lines, geo, spans, conductor_of,
+                                                                          wire_of_input)
     timings["off_trend_s"] = time.perf_counter() - t
 
     # wires the 3D step told apart across one Hough line (a ribbon's phases closer than band_m)
@@ -385,7 +394,7 @@ def _run(inputs, params, ctx):
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
-             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_twin_lines_merged": timings.pop("n_twin_lines_merged", 0), "n_not_wires": len(not_wires), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
+             "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_twin_lines_merged": timings.pop("n_twin_lines_merged", 0), "n_not_wires": len(not_wires), "n_surface_lines": len(surfaces), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
              "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
