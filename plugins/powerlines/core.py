@@ -261,8 +261,24 @@ def _is_ribbon(xyz, bin_m, max_band_m, floor_share) -> bool:
         return True
     if np.subtract(*np.percentile(across, [98, 2])) > max_band_m:
         return False
-    slope, icpt = line_fit(along, xyz[:, 2])
-    return _bands(xyz[:, 2] - slope * along - icpt, bin_m, max_band_m, floor_share)
+    # the trend of wires one above another: the median of pairwise slopes (Theil-Sen), most pairs
+    # lying along one wire; a least-squares line through a sparse stack leans towards whichever
+    # wire has more points at each end, and smears the bands
+    slope = _theil_sen_slope(along, xyz[:, 2])
+    r = xyz[:, 2] - slope * along
+    return _bands(r - np.median(r), bin_m, max_band_m, floor_share)
+
+
+def _theil_sen_slope(x, y, max_pairs: int = 4000) -> float:
+    """The median slope of pairs of points at least a quarter of their extent apart along ``x``
+    (Theil 1950, Sen 1968): all pairs up to ``max_pairs``, else that many drawn (seeded)."""
+    n = len(x)
+    rng = np.random.default_rng(0)
+    i, j = np.triu_indices(n, 1) if n * (n - 1) // 2 <= max_pairs else rng.integers(0, n, (2, max_pairs))
+    far = np.abs(x[j] - x[i]) >= max(0.25 * float(np.ptp(x)), 1e-9)
+    if not far.any():  # (all at one place along: no slope to tell)
+        return line_fit(x, y)[0]
+    return float(np.median((y[j[far]] - y[i[far]]) / (x[j[far]] - x[i[far]])))
 
 
 def _bands(values, bin_m, max_band_m, floor_share) -> bool:
