@@ -1957,7 +1957,7 @@ def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
 
 
 def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, window_m: float = 1.0,
-               min_contrast: float = 4.0, min_sides: int = 5, margin_m: float = 0.5) -> np.ndarray:
+               min_contrast: float = 4.0, min_sides: int = 5, margin_m: float = 0.5, around_tree=None) -> np.ndarray:
     """Per wire point (``line_of``, ``wire_of`` its conductor and wire; -1: none): whether it lies
     where its wire runs through foliage that hides it. Within ``window_m`` along the wire, the
     points ``around_xyz`` (all those off the ground) 0.2-0.5 m from its spans' curve are no
@@ -1966,44 +1966,54 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
     pass the off-trend test where they are the span's own (they set its lateral tolerance); a
     wire beside other wires or a pole has points on a few sides only, and a wall or roof 0.2 m or
     more away spans at most 4 (an arc of 2 arccos(0.2 / 0.5) = 132 degrees). A point on no
-    fitting span of its wire is kept. ``lines`` as for conductors_3d."""
+    fitting span of its wire is kept. ``lines`` as for conductors_3d; ``around_tree``: a k-d tree
+    of ``around_xyz`` already built."""
     foliage = np.zeros(len(px), bool)
     if not len(around_xyz) or not (line_of >= 0).any():
         return foliage
-    tree = cKDTree(around_xyz)
-    for li in np.unique(line_of[line_of >= 0]):
+    tree = around_tree if around_tree is not None else cKDTree(around_xyz)
+    for li, wire, m, wire_spans, near in _wires_and_around(spans, px, py, pz, line_of, wire_of, max_rms, tree,
+                                                           window_m + 0.5):
         anchor, direction, _, _ = lines[li]
+        q = around_xyz[near]
+
+        def frame(x, y, z):
+            return _span_frame(x, y, z, anchor, direction, wire_spans, margin_m)
+
+        s_q, lat_q, dz_q = frame(q[:, 0], q[:, 1], q[:, 2])
+        ok = np.isfinite(dz_q)
+        s_q, lat_q, dz_q = s_q[ok], lat_q[ok], dz_q[ok]
+        order = np.argsort(s_q)
+        s_q, lat_q, dz_q = s_q[order], lat_q[order], dz_q[order]
+        core, ring = core_and_ring_masks(np.hypot(lat_q, dz_q))
+        side = (np.floor((np.arctan2(dz_q, lat_q) + np.pi) / (np.pi / 4)).astype(np.int64)) % 8
+        counts = np.zeros((len(core) + 1, 9))  # cumulative: core, then ring points on each side
+        counts[1:, 0] = np.cumsum(core)
+        for k in range(8):
+            counts[1:, 1 + k] = np.cumsum(ring & (side == k))
+        s_m, _, dz_m = frame(px[m], py[m], pz[m])
+        lo = np.searchsorted(s_q, s_m - window_m)
+        hi = np.searchsorted(s_q, s_m + window_m, side="right")
+        c = counts[hi] - counts[lo]
+        contrast = core_ring_contrast(c[:, 0], c[:, 1:].sum(axis=1))
+        sides = (c[:, 1:] > 0).sum(axis=1)
+        foliage[m] = np.isfinite(dz_m) & (contrast < min_contrast) & (sides >= min_sides)
+    return foliage
+
+
+def _wires_and_around(spans, px, py, pz, line_of, wire_of, max_rms: float, tree, radius_m: float):
+    """For each wire (line and number) of the points ``px, py, pz`` (``line_of``, ``wire_of``; -1:
+    none) with fitting spans: (line, wire, its points, its fitting spans, the indices of the points
+    of ``tree`` within ``radius_m`` of its points)."""
+    for li in np.unique(line_of[line_of >= 0]):
         for wire in np.unique(wire_of[line_of == li]):
             wire_spans = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms <= max_rms]
             if not wire_spans:
                 continue
             m = np.flatnonzero((line_of == li) & (wire_of == wire))
             near = np.unique(np.concatenate(tree.query_ball_point(np.column_stack([px[m], py[m], pz[m]]),
-                                                                  window_m + 0.5)).astype(np.int64))
-            q = around_xyz[near]
-
-            def frame(x, y, z):
-                return _span_frame(x, y, z, anchor, direction, wire_spans, margin_m)
-
-            s_q, lat_q, dz_q = frame(q[:, 0], q[:, 1], q[:, 2])
-            ok = np.isfinite(dz_q)
-            s_q, lat_q, dz_q = s_q[ok], lat_q[ok], dz_q[ok]
-            order = np.argsort(s_q)
-            s_q, lat_q, dz_q = s_q[order], lat_q[order], dz_q[order]
-            core, ring = core_and_ring_masks(np.hypot(lat_q, dz_q))
-            side = (np.floor((np.arctan2(dz_q, lat_q) + np.pi) / (np.pi / 4)).astype(np.int64)) % 8
-            counts = np.zeros((len(core) + 1, 9))  # cumulative: core, then ring points on each side
-            counts[1:, 0] = np.cumsum(core)
-            for k in range(8):
-                counts[1:, 1 + k] = np.cumsum(ring & (side == k))
-            s_m, _, dz_m = frame(px[m], py[m], pz[m])
-            lo = np.searchsorted(s_q, s_m - window_m)
-            hi = np.searchsorted(s_q, s_m + window_m, side="right")
-            c = counts[hi] - counts[lo]
-            contrast = core_ring_contrast(c[:, 0], c[:, 1:].sum(axis=1))
-            sides = (c[:, 1:] > 0).sum(axis=1)
-            foliage[m] = np.isfinite(dz_m) & (contrast < min_contrast) & (sides >= min_sides)
-    return foliage
+                                                                  radius_m)).astype(np.int64))
+            yield int(li), int(wire), m, wire_spans, near
 
 
 def _span_frame(x, y, z, anchor, direction, wire_spans, margin_m: float):
@@ -2022,7 +2032,8 @@ def _span_frame(x, y, z, anchor, direction, wire_spans, margin_m: float):
 
 
 def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, around_wire,
-                 min_contrast: float = SURFACE_CONTRAST, reach_m: float = 1.5, margin_m: float = 0.5) -> set:
+                 min_contrast: float = SURFACE_CONTRAST, reach_m: float = 1.5, margin_m: float = 0.5,
+                 around_tree=None) -> set:
     """Lines (indices into ``lines``) whose wires lie in a surface, not in free space: pooled
     over the line's wires, the points ``around_xyz`` (all those off the ground) are within 0.1 m
     of each wire's spans less than ``min_contrast`` times as dense as 0.2-0.5 m around them
@@ -2032,28 +2043,19 @@ def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aro
     far as the core); a wire lying along one, half again that or more. The tops of crowns lined
     up in the Hough fit a catenary and pass ``in_foliage`` (nothing above them); a real wire
     through a crown is in it over a few stretches only. ``px, py, pz, line_of, wire_of``: the
-    wire points, as for ``in_foliage``."""
-    out = set()
+    wire points, and ``around_tree``, as for ``in_foliage``."""
     if not len(around_xyz) or not (line_of >= 0).any():
-        return out
-    tree = cKDTree(around_xyz)
-    for li in np.unique(line_of[line_of >= 0]):
+        return set()
+    core_n, ring_n = {}, {}
+    tree = around_tree if around_tree is not None else cKDTree(around_xyz)
+    for li, wire, _, wire_spans, near in _wires_and_around(spans, px, py, pz, line_of, wire_of, max_rms, tree,
+                                                           reach_m):
         anchor, direction, _, _ = lines[li]
-        core_n = ring_n = 0
-        for wire in np.unique(wire_of[line_of == li]):
-            wire_spans = [sp for sp in spans if sp.conductor == li and sp.wire == wire and sp.rms <= max_rms]
-            if not wire_spans:
-                continue
-            m = np.flatnonzero((line_of == li) & (wire_of == wire))
-            near = np.unique(np.concatenate(tree.query_ball_point(np.column_stack([px[m], py[m], pz[m]]),
-                                                                  reach_m)).astype(np.int64))
-            near = near[(around_wire[near] < 0) | (around_wire[near] == li * WIRE_ID_BASE + wire)]
-            _, lat, dz = _span_frame(*around_xyz[near].T, anchor, direction, wire_spans, margin_m)
-            core, ring = core_and_ring(np.hypot(lat, dz)[np.isfinite(dz)])
-            core_n, ring_n = core_n + core, ring_n + ring
-        if core_n + ring_n and core_ring_contrast(core_n, ring_n) < min_contrast:
-            out.add(int(li))
-    return out
+        near = near[(around_wire[near] < 0) | (around_wire[near] == li * WIRE_ID_BASE + wire)]
+        _, lat, dz = _span_frame(*around_xyz[near].T, anchor, direction, wire_spans, margin_m)
+        core, ring = core_and_ring(np.hypot(lat, dz)[np.isfinite(dz)])
+        core_n[li], ring_n[li] = core_n.get(li, 0) + core, ring_n.get(li, 0) + ring
+    return {li for li in core_n if core_n[li] + ring_n[li] and core_ring_contrast(core_n[li], ring_n[li]) < min_contrast}
 
 
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):

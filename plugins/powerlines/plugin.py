@@ -313,16 +313,18 @@ def _run(inputs, params, ctx):
     conductor_of[off_trend] = -1
     # where a wire runs through a crown, the crown's points on its curve may be its span's own (and
     # set the span's lateral tolerance): foliage surrounds them, denser than the wire's core
+    from scipy.spatial import cKDTree
+
     wire_pt = np.flatnonzero(conductor_of >= 0)
     around = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0))
-    foliage = wire_pt[in_foliage(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
-                                 conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
-                                 np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]))]
+    around_xyz = np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu])
+    around_tree = cKDTree(around_xyz) if len(around) else None
+    wires = (spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu, conductor_of[wire_pt],
+             wire_of_input[wire_pt], params["max_rms_3d_m"], around_xyz)
+    foliage = wire_pt[in_foliage(*wires, around_tree=around_tree)]
     # a line whose points lie in a surface (the tops of crowns, a roof's rows) is none
     around_wire = np.where(conductor_of[around] >= 0, conductor_of[around] * WIRE_ID_BASE + wire_of_input[around], -1)
-    surfaces = in_a_surface(spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu,
-                            conductor_of[wire_pt], wire_of_input[wire_pt], params["max_rms_3d_m"],
-                            np.column_stack([pc.x[around] * hu, pc.y[around] * hu, pc.z[around] * vu]), around_wire)
+    surfaces = in_a_surface(*wires, around_wire, around_tree=around_tree)
     conductor_of[foliage] = -1
     if surfaces:
         kept = [i for i in range(len(geo)) if i not in surfaces]
