@@ -1120,6 +1120,44 @@ def test_a_pole_ending_its_line_under_another_line_is_a_pylon():
     assert found == [] and len(passed) == 1, [(p.x, p.y, p.n_spans) for p in found]
 
 
+def test_a_crown_joined_to_a_tower_through_its_arm_cells_is_split_off():
+    """A crown under the outer phase, 10 m beside a lattice tower: the arm cells join the two into
+    one candidate (tall cells, 8-connected), whose points' median sits in the crown (span60 seed
+    8's false tower; mobile_dc seed 7's tower lost). The candidate's bodies (its column cells in
+    groups) are judged apart: the crown is not shaped like a tower and goes, the arm cells stay
+    with the body they hang from. Two poles under one cross-arm (an H-frame) stay one pylon."""
+    from toolbox_plugins.powerlines.core import find_pylons
+
+    rng = np.random.default_rng(3)
+    legs = [(sx, sy) for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)]
+    tower = np.vstack([np.column_stack([rng.normal(lx, 0.05, 600), rng.normal(ly, 0.05, 600),
+                                        rng.uniform(0.5, 31.0, 600)]) for lx, ly in legs])
+    arms = np.vstack([np.column_stack([rng.normal(0.0, 0.3, 400), rng.uniform(-w, w, 400), rng.normal(h, 0.1, 400)])
+                      for h, w in ((16.0, 6.6), (24.0, 5.0))])
+    r, a = 3.3 * np.sqrt(rng.uniform(0, 1, 5000)), rng.uniform(0, 2 * np.pi, 5000)
+    crown = np.column_stack([r * np.cos(a), -10.6 + r * np.sin(a), rng.uniform(8.0, 17.0, 5000)])
+    trunk = np.column_stack([rng.normal(0.0, 0.1, 300), rng.normal(-10.6, 0.1, 300), rng.uniform(0.5, 8.0, 300)])
+    ends, end_hag, span_lines, lines_xy = [], [], [], []
+    for y, h in ((-6.0, 16.0), (6.0, 16.0), (-4.5, 24.0), (4.5, 24.0)):
+        for sign in (-1.0, 1.0):
+            a, b = np.array([sign * 0.6, y]), np.array([sign * 150.0, y])
+            ends += [a, b]
+            end_hag += [h, h]
+            span_lines.append((a, b))
+        lines_xy.append((np.array([-150.0, y]), np.array([150.0, y])))
+    ends, end_hag = np.array(ends), np.array(end_hag)
+    headings = [0.0] * len(lines_xy)
+    p = np.vstack([tower, arms, crown, trunk])
+    found = find_pylons(p[:, 0], p[:, 1], p[:, 2], ends, end_hag, headings, lines_xy, span_lines=span_lines)
+    assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0, [(q.x, q.y) for q in found]
+    # an H-frame: two poles 6 m apart under one cross-arm, each a body of its own
+    beam = np.column_stack([rng.normal(0.0, 0.05, 600), rng.uniform(-6.6, 6.6, 600), rng.normal(16.0, 0.05, 600)])
+    frame = np.vstack([_pole_points(rng, 0.0, -3.0, 16.5), _pole_points(rng, 0.0, 3.0, 16.5), beam])
+    found = find_pylons(frame[:, 0], frame[:, 1], frame[:, 2], ends[:8], end_hag[:8], headings[:2], lines_xy[:2],
+                        span_lines=span_lines[:4])
+    assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0, [(q.x, q.y) for q in found]
+
+
 def test_a_crown_reaching_over_a_low_line_where_its_pieces_end_is_no_pylon():
     """A distribution line 8 m up whose two wires are lost in a crown 20 m tall (their pieces end
     either side of it, none runs past): judged as if not rugged, the crown is a column under the
@@ -1780,6 +1818,48 @@ def test_a_line_on_a_crowns_top_is_a_surface_a_wire_along_one_or_in_a_stack_is_n
     # the square's wires in one another's ring, counted as clutter: a surface too
     assert 3 in in_a_surface(*args, around, np.r_[np.where(line_of == 3, -1, line_of * WIRE_ID_BASE + wire_of),
                                                   np.full(len(around) - len(pts), -1)])
+
+
+def test_a_row_or_eave_of_a_sparse_roof_lies_along_a_surface_and_wires_beside_things_do_not():
+    """mobile_dist_far seed 7: a far roof seen at 3 points per square metre, its scan rows and eave
+    lined up in the Hough and fitting a catenary; the roof is too sparse within 0.5 m for the
+    surface test, but 0.5-3 m out on one side its points lie in a plane through the line, filling
+    it across and along. A wire with a crown 1-3 m beside it (a crown scatters about any plane),
+    a ribbon's wire whose three neighbours 0.5 m apart were not found (a few offsets, not a
+    surface) and a 40 m wire passing an 8 m roof at its height 1 m away (a fifth of its length)
+    are wires."""
+    from toolbox_plugins.powerlines.core import WIRE_ID_BASE, _span, along_a_surface
+
+    rng = np.random.default_rng(7)
+
+    def row(y0, z0, length=10.0, n=25, x0=0.0):
+        s = np.sort(rng.uniform(x0, x0 + length, n))
+        return np.column_stack([s, y0 + rng.normal(0, 0.02, n), z0 + 0.001 * (s - x0 - length / 2) ** 2
+                                + rng.normal(0, 0.02, n)])
+
+    def roof(y0, z0, across, tilt_deg, x_from=0.0, x_to=10.0, per_m2=3.0):
+        n = int(per_m2 * (x_to - x_from) * abs(across[1] - across[0]))
+        a = rng.uniform(*across, n)
+        return np.column_stack([rng.uniform(x_from, x_to, n), y0 + a,
+                                z0 + a * np.tan(np.radians(tilt_deg)) + rng.normal(0, 0.02, n)])
+
+    wires = [row(0.0, 8.0), row(20.0, 8.0), row(40.0, 8.0), row(60.0, 8.0), row(80.0, 8.0, 40.0, 200, -15.0)]
+    clutter = [roof(0.0, 8.0, (-4.0, 4.0), 30.0),  # line 0: a scan row across a roof
+               roof(20.0, 8.0, (0.1, 5.0), 25.0),  # line 1: the eave, the roof on one side
+               rng.normal([5.0, 42.0, 8.0], [1.5, 0.6, 1.0], (600, 3)),  # line 2: a crown beside the wire
+               np.vstack([row(60.0 + k * 0.5, 8.0) for k in (1, 2, 3)]),  # line 3: the ribbon's others
+               roof(81.0, 8.0, (0.0, 6.0), 0.0, 0.0, 8.0)]  # line 4: a flat roof beside a long wire
+    lines, spans = [], []
+    for li, w in enumerate(wires):
+        lines.append((np.array([0.0, 0.0]), np.array([1.0, 0.0]), -20.0, 30.0))  # x along, y across
+        spans.append(_span(li, 0, 0, w[:, 0], w[:, 1], fit_catenary(w[:, 0], w[:, 2]), z=w[:, 2]))
+    pts = np.vstack(wires)
+    line_of = np.concatenate([np.full(len(w), li) for li, w in enumerate(wires)])
+    wire_of = np.zeros(len(pts), np.int64)
+    around = np.vstack([pts] + clutter)
+    around_wire = np.r_[line_of * WIRE_ID_BASE, np.full(len(around) - len(pts), -1)]
+    got = along_a_surface(spans, lines, pts[:, 0], pts[:, 1], pts[:, 2], line_of, wire_of, 0.2, around, around_wire)
+    assert got == {0, 1}, got
 
 
 @pytest.mark.parametrize("pieces, turned", [

@@ -33,7 +33,7 @@ def _run(inputs, params, ctx):
     from shapely.geometry import LineString
 
 
-    from .core import (WIRE_ID_BASE, grow_span_ends, height_window_top, in_a_surface, in_foliage, local_surface_density, off_their_spans, points_on_spans,
+    from .core import (WIRE_ID_BASE, along_a_surface, grow_span_ends, height_window_top, in_a_surface, in_foliage, local_surface_density, off_their_spans, points_on_spans,
                        shape_classes, wire_point_spacing)
 
     pc = inputs["points"]
@@ -322,9 +322,11 @@ def _run(inputs, params, ctx):
     wires = (spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu, conductor_of[wire_pt],
              wire_of_input[wire_pt], params["max_rms_3d_m"], around_xyz)
     foliage = wire_pt[in_foliage(*wires, around_tree=around_tree)]
-    # a line whose points lie in a surface (the tops of crowns, a roof's rows) is none
+    # a line whose points lie in a surface (the tops of crowns, a roof's rows) or along one (a sparse
+    # roof's scan row or eave) is none
     around_wire = np.where(conductor_of[around] >= 0, conductor_of[around] * WIRE_ID_BASE + wire_of_input[around], -1)
-    surfaces = in_a_surface(*wires, around_wire, around_tree=around_tree)
+    surfaces = in_a_surface(*wires, around_wire, around_tree=around_tree) | \
+        along_a_surface(*wires, around_wire, around_tree=around_tree)
     conductor_of[foliage] = -1
     if surfaces:
         kept = [i for i in range(len(geo)) if i not in surfaces]
