@@ -2058,29 +2058,29 @@ def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aro
     return {li for li in core_n if core_n[li] + ring_n[li] and core_ring_contrast(core_n[li], ring_n[li]) < min_contrast}
 
 
-
 def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, around_wire,
                     reach_m: float = 3.0, inner_m: float = 0.5, tol_m: float = 0.1, slab_m: float = 0.5,
                     max_slope_deg: float = 60.0, min_share: float = 0.7, bin_m: float = 0.25, min_fill: float = 0.7,
-                    min_cover: float = 0.5,
-                    min_points: int = 10, margin_m: float = 0.5, around_tree=None) -> set:
+                    min_cover: float = 0.5, min_points: int = 10, margin_m: float = 0.5, around_tree=None) -> set:
     """Lines (indices into ``lines``) each of whose wires lies along a surface reaching out from
     it: on one side, ``inner_m`` to ``reach_m`` across, the points ``around_xyz`` (off the
     ground; those on other wires left out, ``around_wire`` as for ``in_a_surface``) lie in a
     plane through the wire's curve: at least ``min_share`` of those within ``slab_m`` of the
     plane are within ``tol_m`` of it, they fill ``min_fill`` of the ``bin_m`` bins across (a
     surface, not the unfound wires of a ribbon at a few offsets) and ``min_cover`` of the wire's
-    length in 1 m bins along. The plane's tilt is the densest in
-    a histogram of the points' elevation angles seen from the wire, within ``max_slope_deg`` of
-    level (a facade a cable is fixed to is no roof). A sparse roof's scan row or its eave lines
-    up in the Hough and fits a catenary, and the 0.2-0.5 m ring of ``in_a_surface`` is too sparse
-    there to tell it; a crown scatters about any plane (a fifth of its points in the slab are
-    that close), and a roof or hedge a long wire passes covers a stretch of it only."""
+    length in 1 m bins along. The plane's tilt is the densest in a histogram of the points'
+    elevation angles seen from the wire, within ``max_slope_deg`` of level (a facade a cable is
+    fixed to is no roof). A sparse roof's scan row or eave lines up in the Hough and fits a
+    catenary; the 0.2-0.5 m ring of ``in_a_surface`` is too sparse there to tell it, and so is
+    each 0.25 m bin of ``span_on_surface`` alone (their union covers the wire). A crown scatters
+    about any plane (a fifth of its points in the slab are that close), and a roof or hedge a
+    long wire passes covers a stretch of it only."""
     if not len(around_xyz) or not (line_of >= 0).any():
         return set()
     tree = around_tree if around_tree is not None else cKDTree(around_xyz)
     flat_wires, all_wires = {}, {}
     edges = np.arange(-max_slope_deg, max_slope_deg + 2.0, 2.0)
+    n_across = np.ceil((reach_m - inner_m) / bin_m)
     for li, wire, m, wire_spans, near in _wires_and_around(spans, px, py, pz, line_of, wire_of, max_rms, tree,
                                                            reach_m):
         all_wires[li] = all_wires.get(li, 0) + 1
@@ -2090,25 +2090,25 @@ def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
         s_w = _span_frame(px[m], py[m], pz[m], anchor, direction, wire_spans, margin_m)[0]
         s_lo, n_along = np.floor(s_w.min()), int(np.floor(s_w.max()) - np.floor(s_w.min())) + 1
         for side in (-1.0, 1.0):
-            a = side * lat
-            q = np.isfinite(dz) & (a >= inner_m) & (a <= reach_m)
-            ang = np.degrees(np.arctan2(dz[q], a[q]))
-            ang = ang[np.abs(ang) <= max_slope_deg]
-            if len(ang) < min_points:
+            q = np.isfinite(dz) & (side * lat >= inner_m) & (side * lat <= reach_m)
+            a, h, sq = side * lat[q], dz[q], s[q]
+            ang = np.degrees(np.arctan2(h, a))
+            if np.sum(np.abs(ang) <= max_slope_deg) < min_points:
                 continue
             votes = np.convolve(np.histogram(ang, bins=edges)[0], np.ones(3), "same")
-            k = np.tan(np.radians(0.5 * (edges[np.argmax(votes)] + edges[np.argmax(votes) + 1])))
-            dist = np.abs(dz[q] - k * a[q]) / np.hypot(1.0, k)
+            k = np.tan(np.radians(edges[np.argmax(votes)] + 1.0))  # the densest bin's middle
+            dist = np.abs(h - k * a) / np.hypot(1.0, k)
             inl = dist <= tol_m
             if inl.sum() < min_points or inl.sum() < min_share * (dist <= slab_m).sum():
                 continue
-            fill = len(np.unique(np.floor((a[q][inl] - inner_m) / bin_m))) / np.ceil((reach_m - inner_m) / bin_m)
-            along = np.unique(np.floor(s[q][inl]) - s_lo)
+            fill = len(np.unique(np.floor((a[inl] - inner_m) / bin_m))) / n_across
+            along = np.unique(np.floor(sq[inl]) - s_lo)
             cover = np.sum((along >= 0) & (along < n_along)) / n_along
             if fill >= min_fill and cover >= min_cover:
                 flat_wires[li] = flat_wires.get(li, 0) + 1
                 break
     return {li for li, n in flat_wires.items() if n == all_wires[li]}
+
 
 def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
     """Per point (``s`` along a line, ``off`` across it, height ``z``): the residual to the
@@ -2538,7 +2538,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     lab = lab.ravel()
     shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
     for k in range(1, n + 1):
-        cells = _shaped_bodies(np.flatnonzero(lab == k), column, (rows, cols), centres, cell_m,
+        cells = _shaped_bodies(np.flatnonzero(lab == k), column, (rows, cols), centres,
                                lambda c: _tower_shaped(c, x, y, hag, flat, top, top_held, column, centres, cell_m,
                                                        max_side_m, min_slenderness, max_rugged) is not None)
         got = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
@@ -2653,14 +2653,14 @@ def _wires_over_cells(grid, wire_x, wire_y, wire_hag, arm_m: float):
     return wire_low, wire_near
 
 
-def _shaped_bodies(cells, column, shape, centres, cell_m: float, shaped) -> np.ndarray:
+def _shaped_bodies(cells, column, shape, centres, shaped) -> np.ndarray:
     """The cells of a candidate (tall cells, 8-connected) less its bodies that are not shaped like
     a tower: its column cells grouped into bodies (closer than 5 cells: a lattice's legs are one
     body, and so are the column cells scattered through one crown), every other cell given to the
-    nearest body. A crown beside a tower joins it through the
-    tower's arm cells and the wires' unlabelled points by the insulators; left in, it moves the
-    base into the crown. Where no body or every body is shaped (an H-frame's two poles), the
-    candidate stays whole. ``shaped(cells)``: whether those cells pass as a tower."""
+    nearest body. A crown beside a tower joins it through the tower's arm cells and the wires'
+    unlabelled points by the insulators; left in, it moves the base into the crown. Where no body
+    or every body is shaped (an H-frame's two poles), the candidate stays whole. ``shaped(cells)``:
+    whether those cells pass as a tower."""
     from scipy import ndimage
 
     mine = cells[column[cells]]
@@ -2676,8 +2676,6 @@ def _shaped_bodies(cells, column, shape, centres, cell_m: float, shaped) -> np.n
     body_of = lab.ravel()[mine]
     nearest = cKDTree(centres[mine]).query(centres[cells])[1]
     parts = [cells[body_of[nearest] == b] for b in np.unique(body_of)]
-    if len(parts) < 2:
-        return cells
     ok = [p for p in parts if shaped(p)]
     return np.sort(np.concatenate(ok)) if ok and len(ok) < len(parts) else cells
 
