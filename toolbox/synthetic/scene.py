@@ -116,6 +116,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     else:
         lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m, span_m=span_m,
                              stacked=line_variant == "stacked")
+    for line in lines:
+        line["towers"] = _supports_at_brows(line, terrain, others=[o for o in lines if o is not line])
     buildings = _place_buildings(kind, W, H, rng, terrain, lines, roof_set)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
     n_eave_trees = 0
@@ -643,6 +645,74 @@ def _place_trees(kind, W, H, rng, terrain, buildings, lines):
                  first_id=10000)
 
 
+def _strung_clear(terrain, pa, pb, za, zb, low, c, tries: int = 40):
+    """The catenary parameter a span pa-pb (plan) between heights za, zb is strung at: ``c``
+    tightened (x1.2, up to ``tries`` times) until the wire keeps half ``low`` (the lower
+    attachment's height over its support's ground) over the ground beneath it; and whether it
+    does."""
+    L = float(np.hypot(*(pb - pa)))
+    probe = np.linspace(0, L, 41)
+    under = terrain.height(pa[0] + probe * (pb - pa)[0] / L, pa[1] + probe * (pb - pa)[1] / L)
+    for _ in range(tries):
+        if low <= 0 or np.min(catenary_z(probe, L, za, zb, c) - under) >= 0.5 * low:
+            return c, True
+        c *= 1.2
+    return c, bool(low <= 0 or np.min(catenary_z(probe, L, za, zb, c) - under) >= 0.5 * low)
+
+
+def _supports_at_brows(line, terrain, others=(), min_span_m: float = 12.0, clear_of_lines_m: float = 12.0,
+                       max_added: int = 3) -> list:
+    """The line's supports with one added where a span cannot be strung clear of the ground
+    (``_strung_clear`` fails for one of its wires: a straight, taut wire would pass a few metres
+    over the brow of an escarpment), at the brow (where the chord between the attachments comes
+    nearest the ground), moved along the line off water, ditch and embankment (a pole may stand on
+    a slope), as a line designer would put one there; at most ``max_added`` per span, none nearer
+    than ``min_span_m`` to another nor within ``clear_of_lines_m`` of the ``others`` lines' axes (no
+    pole under another line's wires). Over an embankment, where none may stand, a span stays as
+    tight as it gets (a few tenths of a metre short of that clearance)."""
+    model, d = line["model"], line["dir"]
+    across = np.array([-d[1], d[0]])
+    towers = [np.asarray(t, float) for t in line["towers"]]
+    out = [towers[0]] if towers else []
+    for nxt in towers[1:]:
+        todo, added = [(out[-1], nxt)], 0
+        while todo:
+            a, b = todo.pop(0)
+            ga, gb = float(terrain.height(*a)), float(terrain.height(*b))
+            brow = None
+            for w in line["wires"]:
+                dx_att, z_att = model.attachments[w["attach"]]
+                off = dx_att + w["dx"]
+                pa, pb = a + across * off, b + across * off
+                za, zb = ga + z_att + w.get("dz", 0.0), gb + z_att + w.get("dz", 0.0)
+                if _strung_clear(terrain, pa, pb, za, zb, min(za - ga, zb - gb), w["c"])[1]:
+                    continue
+                L = float(np.hypot(*(b - a)))
+                probe = np.linspace(0, L, 41)
+                u = (b - a) / L
+                under = terrain.height(pa[0] + probe * u[0], pa[1] + probe * u[1])
+                brow = float(probe[np.argmin(za + (zb - za) * probe / L - under)])
+                break
+            if brow is None or added >= max_added:
+                out.append(b)
+                continue
+            L = float(np.hypot(*(b - a)))
+            at = None
+            for shift in np.r_[0.0, np.c_[np.arange(2.0, 13.0, 2.0), -np.arange(2.0, 13.0, 2.0)].ravel()]:
+                t = brow + shift
+                p = a + (b - a) / L * t
+                if min_span_m <= t <= L - min_span_m and not terrain.excluded(p[0], p[1], 1.0, slopes=False) \
+                        and all(_line_distance(p[0], p[1], o) >= clear_of_lines_m for o in others):
+                    at = p
+                    break
+            if at is None:
+                out.append(b)
+                continue
+            added += 1
+            todo[:0] = [(a, at), (at, b)]  # each end appended once its span clears, in order
+    return out
+
+
 def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origin):
     ox, oy = origin
     model = line["model"]
@@ -680,13 +750,7 @@ def _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_base, origi
             # a long span is strung tighter: the wire keeps at least half the lower attachment's
             # height over the ground beneath it (clearance), as a line designer would keep it
             low = min(za - float(terrain.height(*towers[si])), zb_ - float(terrain.height(*towers[si + 1])))
-            c = w["c"]
-            probe = np.linspace(0, L, 41)
-            under = terrain.height(pa[0] + probe * (pb - pa)[0] / L, pa[1] + probe * (pb - pa)[1] / L)
-            for _ in range(40):
-                if low <= 0 or np.min(catenary_z(probe, L, za, zb_, c) - under) >= 0.5 * low:
-                    break
-                c *= 1.2
+            c, _ = _strung_clear(terrain, pa, pb, za, zb_, low, w["c"])
             n = int(L / spacing)
             s = np.sort(rng.uniform(0, L, n))
             # gaps: stretches without hits, as real scans have

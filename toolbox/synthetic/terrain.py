@@ -141,8 +141,9 @@ class Terrain:
         e = self.embankment
         return self._natural(u, v) + e.height_m + 0.25
 
-    def excluded(self, u, v, margin_m=0.0):
-        """Where objects (buildings, trees) must not stand: water, embankment, ditch, steep band."""
+    def excluded(self, u, v, margin_m=0.0, slopes: bool = True):
+        """Where objects (buildings, trees) must not stand: water, embankment, ditch, steep band,
+        ridge crest; with ``slopes`` False, only the first three (a pole may stand on a slope)."""
         bad = np.zeros(np.shape(u), bool)
         if self.pond is not None:
             cu, cv, ru, rv = self.pond
@@ -155,6 +156,8 @@ class Terrain:
             u0, v0, u1, v1, _, top, _ = self.ditch
             d, along, L = _line_frame(u, v, u0, v0, u1, v1)
             bad |= (np.abs(d) <= top / 2 + margin_m + 1.5) & (along >= -margin_m) & (along <= L + margin_m)
+        if not slopes:
+            return bad
         if self.steep is not None:
             vc, _, hw = self.steep
             bad |= np.abs(v - vc) <= 2.2 * hw + margin_m
