@@ -1158,6 +1158,31 @@ def test_a_crown_joined_to_a_tower_through_its_arm_cells_is_split_off():
     assert len(found) == 1 and np.hypot(found[0].x, found[0].y) <= 1.0, [(q.x, q.y) for q in found]
 
 
+def test_a_stack_of_unfound_wires_running_off_a_pole_does_not_move_its_base():
+    """A joint-use pole on a slope, sparse (17 points at 5 pts/m2, comm4_d5 seed 2), where the
+    stack of four cables climbing to it was not found over its last 6-8 m: their cells are tall
+    (as high as the span ends there) and join the pole's, and the points' median sat 3-7 m down
+    the line (two false towers). Cells with no structure (under 3 layers) more than
+    2.5 m along the line from the column are not where its base is; a lattice's arms, across the
+    line, still are (the crown test above)."""
+    from toolbox_plugins.powerlines.core import find_pylons
+
+    rng = np.random.default_rng(5)
+    pole = _pole_points(rng, 0.5, 0.5, 8.0, per_m=3)
+    s = rng.uniform(0.6, 6.0, 4 * 30)
+    # the wires fall away along the slope from under the pole's top
+    stack = np.column_stack([0.5 - s, rng.normal(0.5, 0.04, len(s)),
+                             np.repeat([5.4, 5.7, 6.0, 6.3], 30) - 0.05 * s])
+    ends = np.array([[0.9, 0.5], [60.0, 0.5], [0.1, 0.5], [-60.0, 0.5]])
+    end_hag = np.full(len(ends), 6.3)
+    lines_xy = [(np.array([-60.0, 0.5]), np.array([60.0, 0.5]))]
+    span_lines = [(ends[0], ends[1]), (ends[2], ends[3])]
+    p = np.vstack([pole, stack])
+    found = find_pylons(p[:, 0], p[:, 1], p[:, 2], ends, end_hag, [0.0], lines_xy, span_lines=span_lines)
+    found = [(q.x - 0.5, q.y - 0.5) for q in found]
+    assert len(found) == 1 and np.hypot(*found[0]) <= 1.0, found
+
+
 def test_a_crown_reaching_over_a_low_line_where_its_pieces_end_is_no_pylon():
     """A distribution line 8 m up whose two wires are lost in a crown 20 m tall (their pieces end
     either side of it, none runs past): judged as if not rugged, the crown is a column under the

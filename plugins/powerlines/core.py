@@ -2584,13 +2584,32 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                                                max_side_ratio, cell_m):
             continue
         # its base where its points are: the middle of its column cells leans to the side a street
-        # scan sees, and to an arm's cells on an angle tower
-        mine = np.flatnonzero(np.isin(flat, cells))
+        # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
+        # runs off its top along the line
+        heading = np.radians(float(line_headings[int(np.argmin(dist))]))
+        mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, heading)))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
         (passed_by if passed else found).append(
             Pylon(bx, by, height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
                   (x0, y0, cell_m, rows, cols)))
     return found
+
+
+def _base_cells(cells, column, n_layers, centres, heading_rad: float, reach_m: float = 2.5,
+                along_deg: float = 30.0) -> np.ndarray:
+    """The cells of a tower's candidate its base is taken from: all but those with no structure
+    (under 3 layers, see ``_tower_grid``) more than ``reach_m`` from its column cells along the
+    line it carries (within ``along_deg`` of ``heading_rad``): a stack of wires the line search
+    missed, running off a pole's top, is tall there and pulls the median metres along the line
+    (a lattice's arms reach across it)."""
+    col = centres[cells[column[cells]]]
+    if not len(col):
+        return cells
+    d, j = cKDTree(col).query(centres[cells])
+    v = centres[cells] - col[j]
+    u = np.array([np.cos(heading_rad), np.sin(heading_rad)])
+    along = np.abs(v @ u) >= np.cos(np.radians(along_deg)) * np.maximum(d, 1e-9)
+    return cells[~((d > reach_m) & along & (n_layers[cells] < 3))]
 
 
 def _tower_grid(x, y, hag, lines_xy, reach_m: float, cell_m: float):
