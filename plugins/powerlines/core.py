@@ -2729,7 +2729,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                                column_share: float = 0.5, arm_m: float = 6.0, max_above_m: float = 2.0,
                                max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
                                known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
-                               max_side_ratio: float = 2.0) -> list:
+                               max_side_ratio: float = 2.0, insulator_m: float = 1.0) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -2743,8 +2743,10 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     ``max_above_m`` over the highest wire near them (a tower's peak holds the earth wire, a pole's
     top its top wire; the crown of a tall tree beside a low line stands far over it), shaped like
     a tower (``_tower_shaped``: a column, slender, not rugged). A candidate is a tower when a wire runs
-    through it, not over it: in one of its cells the wire's lowest point is under the cell's top
-    (trees under a line are trimmed below the wires; a tower's arms hold them), and it stands
+    through it, not over it: in one of its cells the wire's lowest point is under the cell's top,
+    or at most ``insulator_m`` over it (a tower's arms hold the wires; a pole's top wire sits on
+    an insulator over its top, whose last few points a sparse scan may miss; trees under a line
+    are trimmed 2-3 m below the wires), and it stands
     under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
     their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
     base."""
@@ -2760,7 +2762,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     has = np.isfinite(top)
     wire_low, wire_near = _wires_over_cells(grid, wire_x, wire_y, wire_hag, arm_m)
     tall = has & np.isfinite(wire_near) & (top >= top_share * wire_near)
-    through = tall & (wire_low <= top)
+    through = tall & (wire_low <= top + insulator_m)
     column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))
     structure = has & (n_layers >= 3)
     lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
