@@ -2586,11 +2586,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         # its base where its points are: the middle of its column cells leans to the side a street
         # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
         # runs off its top along the line
-        heading = np.radians(float(line_headings[int(np.argmin(dist))]))
-        mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, heading)))
+        heading = float(line_headings[int(np.argmin(dist))])
+        mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, np.radians(heading))))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
         (passed_by if passed else found).append(
-            Pylon(bx, by, height, n_ends, float(line_headings[int(np.argmin(dist))]), body,
+            Pylon(bx, by, height, n_ends, heading, body,
                   (x0, y0, cell_m, rows, cols)))
     return found
 

@@ -645,19 +645,25 @@ def _place_trees(kind, W, H, rng, terrain, buildings, lines):
                  first_id=10000)
 
 
+def _ground_under(terrain, pa, pb, n: int = 41):
+    """The span pa-pb's plan length, ``n`` probes along it (metres from pa) and the ground there."""
+    L = float(np.hypot(*(pb - pa)))
+    probe = np.linspace(0, L, n)
+    return L, probe, terrain.height(pa[0] + probe * (pb - pa)[0] / L, pa[1] + probe * (pb - pa)[1] / L)
+
+
 def _strung_clear(terrain, pa, pb, za, zb, low, c, tries: int = 40):
     """The catenary parameter a span pa-pb (plan) between heights za, zb is strung at: ``c``
     tightened (x1.2, up to ``tries`` times) until the wire keeps half ``low`` (the lower
     attachment's height over its support's ground) over the ground beneath it; and whether it
     does."""
-    L = float(np.hypot(*(pb - pa)))
-    probe = np.linspace(0, L, 41)
-    under = terrain.height(pa[0] + probe * (pb - pa)[0] / L, pa[1] + probe * (pb - pa)[1] / L)
-    for _ in range(tries):
+    L, probe, under = _ground_under(terrain, pa, pb)
+    for k in range(tries + 1):
         if low <= 0 or np.min(catenary_z(probe, L, za, zb, c) - under) >= 0.5 * low:
             return c, True
-        c *= 1.2
-    return c, bool(low <= 0 or np.min(catenary_z(probe, L, za, zb, c) - under) >= 0.5 * low)
+        if k < tries:
+            c *= 1.2
+    return c, False
 
 
 def _supports_at_brows(line, terrain, others=(), min_span_m: float = 12.0, clear_of_lines_m: float = 12.0,
@@ -687,10 +693,7 @@ def _supports_at_brows(line, terrain, others=(), min_span_m: float = 12.0, clear
                 za, zb = ga + z_att + w.get("dz", 0.0), gb + z_att + w.get("dz", 0.0)
                 if _strung_clear(terrain, pa, pb, za, zb, min(za - ga, zb - gb), w["c"])[1]:
                     continue
-                L = float(np.hypot(*(b - a)))
-                probe = np.linspace(0, L, 41)
-                u = (b - a) / L
-                under = terrain.height(pa[0] + probe * u[0], pa[1] + probe * u[1])
+                L, probe, under = _ground_under(terrain, pa, pb)
                 brow = float(probe[np.argmin(za + (zb - za) * probe / L - under)])
                 break
             if brow is None or added >= max_added:
