@@ -78,7 +78,7 @@ def test_taichi_accumulator_equals_numpy_reference(n, seed, theta_step):
 
 
 def test_a_subtraction_with_a_floor_keeps_every_row_that_can_still_peak_exact():
-    """Rows bounded below the floor may keep their votes (whole θ blocks are skipped); every row
+    """Rows bounded below the floor may keep their votes (the kernel skips them); every row
     that can still hold a peak of ``floor`` votes or more counts exactly as numpy's, and so the
     peak does."""
     rng = np.random.default_rng(5)
@@ -3112,12 +3112,21 @@ def test_two_means_split_is_the_best_cut(seed):
     assert _two_means_1d(r[:39], 20) is None  # too few for two groups of 20
 
 
-def test_accumulator_refuses_a_rho_range_without_zero():
-    """Padding θ rows (cos = sin = 0) vote in the ρ = 0 bin: a range without it would spill
-    their votes into a real row, so it is refused."""
-    t = np.radians(np.arange(-90, 90, 1.0))
-    with pytest.raises(ValueError, match="must include ρ = 0"):
-        hough_kernels.TaichiAccumulator(kernels.taichi(), np.cos(t), np.sin(t), 5, 10.0, 100)
+def test_an_accumulator_whose_rho_range_leaves_out_zero_counts_as_numpy():
+    """A ρ range that starts past the origin (points 50-60 m out, θ 0-90°): every count and peak
+    as numpy's."""
+    rng = np.random.default_rng(12)
+    x, y = rng.uniform(50, 60, 2000), rng.uniform(50, 60, 2000)
+    t = np.radians(np.arange(0, 90, 0.5))
+    a = reference.NumpyAccumulator(np.cos(t), np.sin(t), 400, 10.0, 500)
+    assert reference.bin_index(x[:, None], y[:, None], a.cs[None, :], a.ss[None, :], a.off).min() >= 0
+    with hough_kernels.TaichiAccumulator(kernels.taichi(), np.cos(t), np.sin(t), 400, 10.0, 500) as b:
+        a.vote(x, y, 1)
+        b.vote(x, y, 1)
+        assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()
+        a.vote(x[:700], y[:700], -1)
+        b.vote(x[:700], y[:700], -1)
+        assert np.array_equal(a.to_numpy(), b.to_numpy()) and a.peak() == b.peak()
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -3176,7 +3185,7 @@ def test_local_surface_density_counts_points_per_occupied_cell_in_its_window_in_
 
 
 def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():
-    # the kernels clear a block of θ rows when they first touch it, not in a pass of their own:
+    # the kernels clear a θ row when they first touch it, not in a pass of their own:
     # the counts a previous tile left behind must never show
     rng = np.random.default_rng(7)
     x, y = rng.uniform(0, 110, 4000), rng.uniform(0, 110, 4000)
@@ -3188,7 +3197,7 @@ def test_a_new_accumulator_reads_zero_whatever_the_last_one_left():
     with hough_kernels.TaichiAccumulator(kernels.taichi(), c, s, k_min, 10.0, rows) as b:
         assert not b.to_numpy().any() and b.peak()[2] == 0
         a.clear_cell(40, 700)
-        b.clear_cell(40, 700)  # a cell of a block no vote has touched yet
+        b.clear_cell(40, 700)  # a cell of a row no vote has touched yet
         assert not b.to_numpy().any()
         x2, y2 = x[:500], y[:500]
         a.vote(x2, y2, 1)

@@ -3,46 +3,40 @@ band's votes and finding the peak, with the votes kept in taichi memory (only pe
 ``reference.NumpyAccumulator`` is the numpy twin; both bin with :func:`reference.bin_scales`.
 
 Why it is written this way (each measured on the 2-core CI machine, 20 000 points × 1800 θ):
-- one task owns each block of ``THETA_BLOCK`` θ rows, so there are no atomics (taichi makes ``+=``
-  on global memory atomic; a plain load/store is 2× faster) and each point loaded feeds 16
-  independent increments (instruction-level parallelism instead of one dependent chain);
-- a new accumulator is not cleared in a pass of its own: each block is zeroed by the first vote
-  that touches it (per-block ``fresh`` flags), while it is in cache for the votes;
+- one loop iteration owns one θ row and takes every point's vote in it: no two iterations share a
+  cell, so there are no atomics (taichi makes ``+=`` on global memory atomic; a plain load/store
+  is 2× faster), and the row (a few thousand counts) stays in the L1 cache while it is counted.
+  An earlier layout gave each task a block of 16 rows and each point 16 independent increments:
+  it spread the votes over 16 rows (L2, not L1) and ran at a seventh of this speed;
+- a new accumulator is not cleared in a pass of its own: each row is zeroed by the first vote
+  that touches it (per-row ``fresh`` flags), while it is in cache for the votes;
 - the votes live in taichi *fields*, whose addressing compiles to constants: the same loop over
   ndarrays (a pointer and stride load per access) was 3–4× slower;
 - the fields have a fixed capacity and the kernels name them directly (not as template
   arguments), so taichi's offline cache serves the compiled kernels to the next process: that
   saved 0.4 s of start-up per run;
-- taichi's CPU backend hands a range-for to its threads in chunks of up to 512 iterations, so a
-  loop over 113 θ blocks would run on one thread: the loop runs over ``tasks × TASK_STRIDE``
-  iterations of which only each chunk's first does work, a task being a run of θ blocks (a few
-  tasks per thread: each costs a hand-off; 8 tasks voted 12 % faster than 113 on AHN4).
 - few, small kernels: a fresh process pays 40-150 ms per kernel (taichi's Python front end runs
-  even when the offline cache holds the machine code), so the θ rows are padded to whole blocks
-  (no remainder loop), the band-subtraction flags are always computed (no second variant: the
-  compare costs nothing measurable beside the scattered increments) and small steps are merged;
+  even when the offline cache holds the machine code), so the band-subtraction flags are always
+  computed (no second variant: the compare costs nothing measurable beside the increments) and
+  small steps are merged;
 - handing a loop to taichi's CPU thread pool costs 0.15-0.25 ms with the launch (even an empty
   loop), about what subtracting a band of 300 points costs. So the band's subtraction only flags
   the rows whose peak cell lost votes, and the peak search is one *serial* kernel: it rescans
   dirty rows only while their old maximum (an upper bound) could still win, the highest bound
-  first. Before, a parallel rescan kernel ran 1-3 times per peak (0.9 ms per peak on AHN4; now
-  0.3-0.5 ms). Rescanning hit rows eagerly inside the vote kernel was tried: more rows scanned,
-  2x slower per band. Tiny loops (copying a band's few hundred points) run in the launching thread.
-- a band's subtraction skips the θ blocks whose rows are all bounded below the caller's vote
-  threshold (most rows, once a tile's first peak is known): those rows can no longer win, and
-  each subtraction otherwise streamed the whole accumulator through memory (AHN4 85 -> 45 ms).
+  first. Tiny loops (copying a band's few hundred points) run in the launching thread.
+- a band's subtraction skips the rows bounded below the caller's vote threshold (most rows, once
+  a tile's first peak is known): those rows can no longer win; the rows it still counts are
+  handed to the threads a few at a time (``ROWS_PER_CHUNK``), as they may lie anywhere.
 - given the box its points come from, an accumulator clears and scans each θ row only over the
   ρ bins the box reaches (55-75 % of a row for a tile at its own origin); the counts outside are
-  zeros never stored (AHN4's Hough stage 12 ms quicker, paired runs in one process).
-Result: 2–3 G votes/s against 0.22 G for the previous one-θ-per-thread ndarray kernel.
+  zeros never stored.
 """
 
 import numpy as np
 
 from .reference import bin_index, bin_scales
 
-THETA_BLOCK = 16
-TASK_STRIDE = 512
+ROWS_PER_CHUNK = 8
 POINTS_PER_PASS = 1 << 20  # points are voted in passes of at most this many
 MAX_THETAS = 1 << 15  # 0.0055° steps at the finest
 UNBOUNDED = 2**31 - 1  # the bound of a row whose counts grew
@@ -55,7 +49,6 @@ _busy = [False]
 
 
 def _build(ti, cells: int):
-    B, S = THETA_BLOCK, TASK_STRIDE
     on_cpu = ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
     xs = ti.field(ti.f32, POINTS_PER_PASS)
     ys = ti.field(ti.f32, POINTS_PER_PASS)
@@ -75,15 +68,14 @@ def _build(ti, cells: int):
     # per block of θ rows: its counts are stale (a new accumulator) and read as zeros; the first
     # vote clears them where it is about to count (a separate clearing pass over the whole
     # accumulator cost 3 ms per tile, and the vote then fetched every line from memory again)
-    fresh = ti.field(ti.i32, MAX_THETAS // B)
+    fresh = ti.field(ti.i32, MAX_THETAS)
 
     @ti.func
-    def clear_block(blk, n_rho):
-        for q in range(B):
-            base = (blk * B + q) * n_rho
-            for k in range(reach_lo[blk * B + q], reach_hi[blk * B + q] + 1):
-                flat[base + k] = 0
-        fresh[blk] = 0
+    def clear_row(j, n_rho):
+        base = j * n_rho
+        for k in range(reach_lo[j], reach_hi[j] + 1):
+            flat[base + k] = 0
+        fresh[j] = 0
 
     @ti.func
     def rescan(j, n_rho):
@@ -106,13 +98,12 @@ def _build(ti, cells: int):
 
     @ti.kernel
     def vote(xa: ti.types.ndarray(dtype=ti.f32, ndim=1), ya: ti.types.ndarray(dtype=ti.f32, ndim=1),
-             n_blocks: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32, n_tasks: ti.i32, floor: ti.i32):
-        # θ rows come in whole blocks (the accumulator is padded to a multiple of B rows, whose
-        # padding rows nobody reads): one loop body, a small kernel that loads quickly.
-        # Rows whose peak cell lost votes are flagged dirty: their old maximum bounds the new one,
-        # and ``peak`` rescans only those that could still win. Added votes unbound every row.
-        # A subtraction skips the blocks whose rows are all bounded below ``floor``: they can no
-        # longer hold a peak the caller takes, and their counts are left as they are.
+             n_theta: ti.i32, n_rho: ti.i32, off: ti.f32, sign: ti.i32, floor: ti.i32):
+        # one θ row per iteration: its counts stay in the L1 cache while every point votes in it,
+        # and no two iterations share a cell (no atomics). Rows whose peak cell lost votes are
+        # flagged dirty: their old maximum bounds the new one, and ``peak`` rescans only those
+        # that could still win. Added votes unbound every row. A subtraction skips the rows
+        # bounded below ``floor``: they can no longer hold a peak the caller takes.
         n = xa.shape[0]
         # the points are copied into the fields; on the CPU in the launching thread (handing a loop
         # to the thread pool costs about 0.1 ms, and most votes are a band of a few hundred points)
@@ -120,31 +111,25 @@ def _build(ti, cells: int):
         for i in range(n):
             xs[i] = xa[i]
             ys[i] = ya[i]
-        for t in range(n_tasks * S):
-            if t % S == 0:
-                task = t // S
-                for blk in range(n_blocks * task // n_tasks, n_blocks * (task + 1) // n_tasks):
-                    j0 = blk * B
-                    bound = ti.Vector([row_max[j0 + q] for q in ti.static(range(B))])
-                    if sign > 0 or bound.max() >= floor:
-                        if fresh[blk]:
-                            clear_block(blk, n_rho)
-                        cv = ti.Vector([cs[j0 + q] for q in ti.static(range(B))])
-                        sv = ti.Vector([ss[j0 + q] for q in ti.static(range(B))])
-                        row = ti.Vector([(j0 + q) * n_rho for q in ti.static(range(B))])
-                        peak = ti.Vector([row_arg[j0 + q] for q in ti.static(range(B))]) + row
-                        hit = ti.Vector([0 for q in ti.static(range(B))])
-                        for i in range(n):
-                            a = ti.cast(xs[i] * cv + ys[i] * sv + off, ti.i32) + row
-                            for q in ti.static(range(B)):
-                                flat[a[q]] = flat[a[q]] + sign  # not +=: that would be atomic
-                            hit |= ti.cast(a == peak, ti.i32)
-                        for q in ti.static(range(B)):
-                            if sign > 0:  # counts went up: no bound holds, ``peak`` rescans the row
-                                row_max[j0 + q] = UNBOUNDED
-                                dirty[j0 + q] = 1
-                            elif hit[q]:
-                                dirty[j0 + q] = 1
+        ti.loop_config(block_dim=ROWS_PER_CHUNK)
+        for j in range(n_theta):
+            if sign > 0 or row_max[j] >= floor:
+                if fresh[j]:
+                    clear_row(j, n_rho)
+                c = cs[j]
+                s = ss[j]
+                row = j * n_rho
+                peak_at = row_arg[j] + row
+                hit = 0
+                for i in range(n):
+                    a = ti.cast(xs[i] * c + ys[i] * s + off, ti.i32) + row
+                    flat[a] = flat[a] + sign  # not +=: that would be atomic
+                    hit |= ti.cast(a == peak_at, ti.i32)
+                if sign > 0:  # counts went up: no bound holds, ``peak`` rescans the row
+                    row_max[j] = UNBOUNDED
+                    dirty[j] = 1
+                elif hit:
+                    dirty[j] = 1
 
     @ti.kernel
     def peak(n_theta: ti.i32, n_rho: ti.i32) -> ti.types.vector(3, ti.i32):
@@ -176,7 +161,7 @@ def _build(ti, cells: int):
     @ti.kernel
     def reset(a: ti.types.ndarray(dtype=ti.f32, ndim=1), b: ti.types.ndarray(dtype=ti.f32, ndim=1),
               lo: ti.types.ndarray(dtype=ti.i32, ndim=1), hi: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        # a new accumulator: its θ factors (padding rows get 0) and reaches, every block's counts stale
+        # a new accumulator: its θ factors and reaches, every row's counts stale
         ti.loop_config(serialize=on_cpu)
         for j in range(a.shape[0]):
             cs[j] = a[j]
@@ -186,20 +171,19 @@ def _build(ti, cells: int):
             row_max[j] = 0
             row_arg[j] = 0
             dirty[j] = 0
-            if j % B == 0:
-                fresh[j // B] = 1
+            fresh[j] = 1
 
     @ti.kernel
     def copy_out(out: ti.types.ndarray(dtype=ti.i32, ndim=1), n_rho: ti.i32):
         for i in range(out.shape[0]):
             j = i // n_rho
             k = i - j * n_rho
-            out[i] = 0 if fresh[j // B] or k < reach_lo[j] or k > reach_hi[j] else flat[i]
+            out[i] = 0 if fresh[j] or k < reach_lo[j] or k > reach_hi[j] else flat[i]
 
     @ti.kernel
     def clear_cell(j: ti.i32, k: ti.i32, n_rho: ti.i32):
-        if fresh[j // B]:
-            clear_block(j // B, n_rho)
+        if fresh[j]:
+            clear_row(j, n_rho)
         flat[j * n_rho + k] = 0
         dirty[j] = 1  # a lower count: the row's maximum still bounds it
 
@@ -239,24 +223,13 @@ class TaichiAccumulator:
         cs, ss, self.off = bin_scales(cos_t, sin_t, k_min, inv_drho)
         self.shape = (len(cs), int(n_rho))
         self.size = self.shape[0] * self.shape[1]
-        self.blocks = -(-len(cs) // THETA_BLOCK)  # θ rows padded to whole blocks
-        rows = self.blocks * THETA_BLOCK
-        if rows * self.shape[1] >= 2**31 or rows > MAX_THETAS:
+        rows = self.shape[0]
+        if self.size >= 2**31 or rows > MAX_THETAS:
             raise ValueError(f"a {self.shape[0]} x {self.shape[1]} accumulator exceeds the kernel's limits "
                              f"(2^31 cells, {MAX_THETAS} θ steps)")
-        if not 0 <= int(self.off) < self.shape[1]:  # padding rows (cos = sin = 0) vote in the ρ = 0 bin
-            raise ValueError(f"the ρ range (bins {k_min}..{k_min + self.shape[1] - 1}) must include ρ = 0")
         if _busy[0]:
             raise RuntimeError("a TaichiAccumulator is already open in this process; close it first")
-        self.k = _kit(ti, rows * self.shape[1])
-        # θ blocks per task: on the CPU a few tasks per thread (each task handed to the thread
-        # pool costs; 113 tasks of one block each took 12 % longer than 8 on AHN4's votes), on a
-        # GPU one block each
-        cfg = ti.lang.impl.current_cfg()
-        on_cpu = cfg.arch in (ti.x64, ti.arm64)
-        self.tasks = min(self.blocks, 4 * int(cfg.cpu_max_num_threads)) if on_cpu else self.blocks
-        pad = np.zeros(rows - len(cs), np.float32)
-        cs, ss = np.r_[cs, pad], np.r_[ss, pad]
+        self.k = _kit(ti, self.size)
         self.extent = None if extent is None else tuple(float(v) for v in extent)
         lo, hi = reach(cs, ss, self.off, self.shape[1], self.extent)
         self.k["reset"](cs, ss, lo, hi)
@@ -264,10 +237,8 @@ class TaichiAccumulator:
 
     def vote(self, x, y, sign: int = 1, floor: int = 0) -> None:
         """See :meth:`reference.NumpyAccumulator.vote`. A subtraction leaves the rows bounded
-        below ``floor`` as they are (whole θ blocks of them): most rows of a tile are, once its
-        first peak is known, and each subtraction otherwise streams the whole accumulator
-        through memory (AHN4: 60 band subtractions 85 -> 45 ms; the whole Hough stage 145-190 ->
-        127-168 ms)."""
+        below ``floor`` as they are: most rows of a tile are, once its first peak is known, and
+        each subtraction otherwise streams the whole accumulator through memory."""
         x = np.asarray(x, np.float32)
         y = np.asarray(y, np.float32)
         floor = int(floor) if sign < 0 else 0
@@ -279,8 +250,7 @@ class TaichiAccumulator:
         for s in range(0, len(x), POINTS_PER_PASS):
             xp = np.ascontiguousarray(x[s:s + POINTS_PER_PASS])
             yp = np.ascontiguousarray(y[s:s + POINTS_PER_PASS])
-            self.k["vote"](xp, yp, self.blocks, self.shape[1], float(self.off), 1 if sign > 0 else -1, self.tasks,
-                           floor)
+            self.k["vote"](xp, yp, self.shape[0], self.shape[1], float(self.off), 1 if sign > 0 else -1, floor)
 
     def peak(self) -> tuple[int, int, int]:
         c, r, votes = self.k["peak"](*self.shape)
@@ -290,7 +260,7 @@ class TaichiAccumulator:
         self.k["clear_cell"](c, r, self.shape[1])
 
     def to_numpy(self) -> np.ndarray:
-        out = np.empty(self.size, np.int32)  # the real rows come first
+        out = np.empty(self.size, np.int32)
         self.k["copy_out"](out, self.shape[1])
         return out.reshape(self.shape)
 
