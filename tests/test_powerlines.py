@@ -2598,6 +2598,52 @@ def test_a_sparse_pole_whose_top_wire_runs_over_it_is_passed_through():
     assert len(found) == 1 and np.hypot(found[0].x - 0.3, found[0].y - 0.3) <= 1.0, [(p.x, p.y) for p in found]
 
 
+# a crown's cap between a low line's two conductors (dist_d5 seed 5, 5 pts/m2: its points, x y and
+# height above ground, about its middle); its pulses' later returns stop 3.9 m up
+CROWN_CAP = [[-1.02, -0.18, 6.04], [-1.01, 0.53, 4.85], [-0.86, -0.79, 5.85], [-0.84, -0.31, 6.28],
+             [-0.83, -0.21, 6.25], [-0.83, -0.21, 5.55], [-0.83, -0.21, 3.89], [-0.7, 0.73, 5.5], [-0.7, 0.73, 5.39],
+             [-0.7, 0.73, 4.39], [-0.22, 0.86, 5.91], [-0.22, 0.86, 5.2], [-0.16, 1.04, 5.58], [-0.16, 1.04, 5.57],
+             [-0.16, 1.04, 4.82], [-0.12, 0.48, 6.45], [-0.12, 0.48, 6.36], [-0.02, 1.13, 5.3], [-0.02, 1.13, 5.24],
+             [-0.02, 1.13, 5.22], [0.05, -1.07, 6.26], [0.05, -1.07, 4.87], [0.05, 0.21, 6.47], [0.16, 0.64, 6.38],
+             [0.29, 0.94, 5.84], [0.29, 0.94, 5.78], [0.29, 0.94, 4.01], [0.43, -1.46, 5.16], [0.45, 0.52, 6.46],
+             [0.45, 0.52, 4.94], [0.9, -0.84, 6.27], [0.92, 0.58, 5.76], [0.92, -0.75, 6.12], [0.94, -0.85, 6.06],
+             [0.94, -0.85, 5.81], [0.94, -0.85, 5.18], [1.02, -1.14, 5.08], [1.08, 0.61, 5.62], [1.08, 0.61, 5.48],
+             [1.11, 0.66, 5.15], [1.26, -0.92, 5.27], [1.26, -0.92, 5.05], [1.26, -0.92, 4.61], [1.34, -0.16, 5.63],
+             [1.34, -0.16, 5.57]]
+
+
+def test_a_crown_cap_the_wires_run_through_is_no_tower_a_pole_reaching_down_is():
+    """A low line's two conductors (5.6 m up, no span ending there) running either side of a
+    crown's cap that stands 0.8 m over them: the cap is tall, a column (3 of the layers down to
+    3 m), slender enough and not rugged enough at 5 pts/m2 to tell, but a support stands on the
+    ground and the scan sees its body under its head, where the crown's foliage hides its trunk
+    (its lowest point is 3.9 m up, over half its height: dist_d5 seed 5's false tower). A sparse
+    pole in its place, with points down its height, is found."""
+    from toolbox_plugins.powerlines.core import find_towers_passed_through
+
+    o = np.array([512284.5, 5403070.5])  # where it stood (the 1 m search grid lies on whole metres)
+    u = np.array([-0.3265, -0.9452])  # the line's direction
+    t = np.arange(-60.0, 60.0, 0.4)
+    wires, lines_xy = [], []
+    for at in ((1.22, -0.42), (-1.05, 0.36)):
+        xy = o + at + t[:, None] * u
+        wires.append(np.column_stack([xy, 5.64 - 0.005 * t + 1.5e-4 * t ** 2]))
+        lines_xy.append((xy[0], xy[-1]))
+    w = np.vstack(wires)
+    cap = np.array(CROWN_CAP) + [*o, 0.0]
+    found = find_towers_passed_through(cap[:, 0], cap[:, 1], cap[:, 2], w[:, 0], w[:, 1], w[:, 2], [70.9] * 2,
+                                       lines_xy)
+    assert found == [], [(p.x, p.y, p.height_m) for p in found]
+    rng = np.random.default_rng(4)
+    h = np.sort(rng.uniform(0.3, 6.2, 14))
+    pole = np.column_stack([rng.normal(0.0, 0.03, (len(h), 2)), h])
+    arm = np.column_stack([np.linspace(-1.3, 1.3, 7)[:, None] * np.array([0.9452, -0.3265]), np.full(7, 5.5)])
+    pts = np.vstack([pole, arm]) + [*o, 0.0]
+    found = find_towers_passed_through(pts[:, 0], pts[:, 1], pts[:, 2], w[:, 0], w[:, 1], w[:, 2], [70.9] * 2,
+                                       lines_xy)
+    assert len(found) == 1 and np.hypot(found[0].x - o[0], found[0].y - o[1]) <= 1.0, [(p.x, p.y) for p in found]
+
+
 def test_mobile_double_circuit_crossings_stop_at_the_last_pole(tmp_path):
     """A double circuit seen by a mobile scanner, line B ending at a pole just short of line A's
     far circuit: B crosses the three conductors of the near one only (9 of 9 true; 11 reported

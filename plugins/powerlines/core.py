@@ -2729,7 +2729,8 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                                column_share: float = 0.5, arm_m: float = 6.0, max_above_m: float = 2.0,
                                max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
                                known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
-                               max_side_ratio: float = 2.0, insulator_m: float = 1.0) -> list:
+                               max_side_ratio: float = 2.0, insulator_m: float = 1.0,
+                               reach_down_share: float = 0.5) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -2746,7 +2747,10 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     through it, not over it: in one of its cells the wire's lowest point is under the cell's top,
     or at most ``insulator_m`` over it (a tower's arms hold the wires; a pole's top wire sits on
     an insulator over its top, whose last few points a sparse scan may miss; trees under a line
-    are trimmed 2-3 m below the wires), and it stands
+    are trimmed 2-3 m below the wires), its points reach down to ``reach_down_share`` of its
+    height (no span ends there to vouch for it, so its own body must: a support stands on the
+    ground and is seen under its head, from the air as from the street, where a crown's cap
+    that a low line runs through hides its trunk), and it stands
     under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
     their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
     base."""
@@ -2781,6 +2785,9 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
             continue
         centre, arm, height = shaped
         if height > wire_near[cells].max() + max_above_m:
+            continue
+        # a support stands on the ground, its body in view under its head; a crown's cap hides its trunk
+        if float(hag[np.isin(flat, cells)].min()) > reach_down_share * height:
             continue
         if len(known_xy) and np.hypot(*(known_xy - centre).T).min() <= known_m:
             continue
