@@ -65,8 +65,8 @@ def _build(ti, cells: int):
     # the counts outside are zeros that are never stored, cleared or scanned
     reach_lo = ti.field(ti.i32, MAX_THETAS)
     reach_hi = ti.field(ti.i32, MAX_THETAS)
-    # per block of θ rows: its counts are stale (a new accumulator) and read as zeros; the first
-    # vote clears them where it is about to count (a separate clearing pass over the whole
+    # per θ row: its counts are stale (a new accumulator) and read as zeros; the first vote
+    # clears them where it is about to count (a separate clearing pass over the whole
     # accumulator cost 3 ms per tile, and the vote then fetched every line from memory again)
     fresh = ti.field(ti.i32, MAX_THETAS)
 

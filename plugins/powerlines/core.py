@@ -2786,10 +2786,10 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         centre, arm, height = shaped
         if height > wire_near[cells].max() + max_above_m:
             continue
+        if len(known_xy) and np.hypot(*(known_xy - centre).T).min() <= known_m:
+            continue
         # a support stands on the ground, its body in view under its head; a crown's cap hides its trunk
         if float(hag[np.isin(flat, cells)].min()) > reach_down_share * height:
-            continue
-        if len(known_xy) and np.hypot(*(known_xy - centre).T).min() <= known_m:
             continue
         # its arms reach out under the wires below its head (shorter than the tall cells' top)
         standing = structure & (top >= 0.5 * height)
