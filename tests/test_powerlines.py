@@ -3415,3 +3415,96 @@ def test_a_short_stub_runs_along_a_line_its_ends_lie_on():
     assert _along((np.array([0.0, -0.1]), d, 0.0, 9.5), h, 0.4)
     assert not _along((np.array([0.0, -0.36]), d, 0.0, 30.0), h, 0.4)
     assert not _along((np.array([0.0, 0.3]), d, 0.0, 9.5), h, 0.4)  # its far end 0.53 m off
+
+
+def test_a_wire_running_into_a_crown_is_thin_across_and_a_crowns_edge_is_not():
+    """A wire whose piece a crown is linked to (mobile_dist_far seed 10: line B's wire into a
+    conifer by its pole) scatters across its line by the crown's points (plain lateral rms over
+    WIRE_LATERAL_RMS_M), but the points on its catenary are thin in robust sigma: a conductor. A
+    crown's edge lined up along a street, at a catenary's heights, is wide either way."""
+    from toolbox_plugins.powerlines.core import WIRE_LATERAL_RMS_M, thin_across
+
+    rng = np.random.default_rng(10)
+    L, z0, c = 20.0, 20.0, 900.0
+    sw = np.sort(rng.uniform(0, L, 60))
+    wire = np.column_stack([sw, rng.normal(0, 0.02, 60), catenary(sw, z0, 30.0, c) + rng.normal(0, 0.02, 60)])
+    sc = rng.uniform(12.0, 16.0, 50)
+    crown = np.column_stack([sc, rng.uniform(-0.9, 0.9, 50), catenary(sc, z0, 30.0, c) + rng.uniform(-1.0, 0.3, 50)])
+    geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, L)]
+
+    def spans_of(pts):
+        return conductors_3d(geo, pts[:, 0], pts[:, 1], pts[:, 2], band=1.0, z_link=1.0, s_link=5.0, min_span=8.0,
+                             max_rms=0.2)[0]
+
+    spans = [sp for sp in spans_of(np.vstack([wire, crown])) if sp.rms <= 0.2 and sp.s_to - sp.s_from >= 8.0]
+    assert spans and max(sp.offset_rms for sp in spans) > WIRE_LATERAL_RMS_M  # the crown's scatter
+    assert all(thin_across(sp) for sp in spans)
+    se = rng.uniform(0, L, 150)
+    edge = np.column_stack([se, rng.uniform(-0.5, 0.5, 150), catenary(se, z0, 30.0, c) + rng.normal(0, 0.05, 150)])
+    assert not any(thin_across(sp) for sp in spans_of(edge))
+
+
+def test_a_line_between_a_ribbons_phases_settles_on_its_own_wire():
+    """A Hough line drawn between a 0.4 m ribbon's phases (ribbon04 seed 10) drifts 0.25 m off its
+    wire over 500 m (under band_m) and holds pieces of the next phase: the spans of its main wire
+    settle it at a quarter band_m; the other phase's pieces, trending the other way, do not."""
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.core import Span
+    from toolbox_plugins.powerlines.plugin import _main_wire_spans, _realign
+
+    slope = -0.0005  # the main wire's offset, 0.1 m at s = 0, across the line along it
+    main = [Span(0, 0, k, s0 + 50.0, 900.0, 10.0, s0, s0 + 100.0, 0.03, 200, 1.4, 0.1, slope, 0.03)
+            for k, s0 in enumerate(range(0, 500, 100))]
+    other = [Span(0, 1, k, s0 + 50.0, 900.0, 10.0, s0, s0 + 60.0, 0.03, 60, 0.5, 0.4, 0.001, 0.03)
+             for k, s0 in enumerate((0, 200))]
+    assert _main_wire_spans(main + other, 0.2) == main
+    geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 500.0)]
+    lines = {"conductors": gpd.GeoDataFrame({"conductor": [0], "azimuth_deg": [90.0]},
+                                            geometry=[LineString([(0, 0), (500, 0)])]),
+             "conductor_segments": gpd.GeoDataFrame({"conductor": [0]}, geometry=[LineString([(0, 0), (500, 0)])])}
+    params = {"max_rms_3d_m": 0.2, "s_min_m": 8.0, "band_m": 0.4}
+    assert _realign(lines, geo, main, params, 1.0)[2] == 0  # within band_m: the band holds its wire
+    lines2, geo2, n = _realign(lines, geo, _main_wire_spans(main + other, 0.2), params, 1.0, min_drift_m=0.1)
+    assert n == 1
+    for (x, y) in lines2["conductors"].geometry[0].coords:  # on the main wire at both ends
+        assert abs(y - (0.1 + slope * x)) < 0.01
+
+
+def test_a_line_crosses_where_its_wire_points_reach_past_its_hough_extent():
+    """Line B's Hough segment stops 7 m short of line A (mobile_dist_far seed 10: its wire seen
+    again near its pole, taken by the growth); its wire points reach over A: the crossing is
+    there. Without them it is not."""
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.plugin import _crossings_of
+
+    cond = gpd.GeoDataFrame({"conductor": [0, 1]}, geometry=[LineString([(0, 0), (100, 0)]),
+                                                             LineString([(50, -40), (50, -7)])])
+    segs = gpd.GeoDataFrame({"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([]))
+    assert len(_crossings_of(cond, segs, "extent", 1.0)) == 0
+    reach = [None, (np.array([50.0, -40.0]), np.array([50.0, 3.0]))]
+    got = _crossings_of(cond, segs, "extent", 1.0, wire_reach=reach)
+    assert len(got) == 1 and got.geometry[0].distance(gpd.points_from_xy([50.0], [0.0])[0]) < 1e-6
+
+
+def test_wire_points_on_a_found_support_carry_a_line_to_it_not_past_it():
+    """Line B ends at a pole found 0.35 m short of line A, its wire points reaching over the pole's
+    top (mobile_stacked seed 1): A passes beside the pole, no crossing. With the pole 0.33 m past
+    A (mobile_stacked seed 9) B's wire runs over A to it: a crossing."""
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.core import Pylon
+    from toolbox_plugins.powerlines.plugin import _crossings_of
+
+    def pole(x, y):
+        return Pylon(x, y, 11.0, 3, 90.0, np.array([0]), (x - 0.5, y - 0.5, 1.0, 1, 1), kind="pole")
+
+    cond = gpd.GeoDataFrame({"conductor": [0, 1]}, geometry=[LineString([(0, 0), (100, 0)]),
+                                                             LineString([(50, -40), (50, -3)])])
+    segs = gpd.GeoDataFrame({"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([]))
+    past = [None, (np.array([50.0, -40.0]), np.array([50.0, 0.05]))]
+    assert len(_crossings_of(cond, segs, "extent", 1.0, found=[pole(50.0, -0.35)], wire_reach=past)) == 0
+    over = [None, (np.array([50.0, -40.0]), np.array([50.0, 0.4]))]
+    got = _crossings_of(cond, segs, "extent", 1.0, found=[pole(50.0, 0.33)], wire_reach=over)
+    assert len(got) == 1 and got.geometry[0].distance(gpd.points_from_xy([50.0], [0.0])[0]) < 1e-6

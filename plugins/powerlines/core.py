@@ -855,6 +855,15 @@ def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
     return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms, lateral_tol)
 
 
+def thin_across(sp: Span) -> bool:
+    """Whether a span's points are a wire's across its line: their lateral rms about its plan
+    trend within WIRE_LATERAL_RMS_M or, where foliage the wire runs into is linked to its piece
+    (a crown at a pole, under a low line), the points on its catenary within that in robust
+    sigma (its lateral tolerance, 3 sigma, within 3 WIRE_LATERAL_RMS_M). A crown's edge lined up
+    along a street scatters across the line either way."""
+    return sp.offset_rms <= WIRE_LATERAL_RMS_M or sp.lateral_tol <= 3 * WIRE_LATERAL_RMS_M
+
+
 def _refined_trend(s, off, o1: float, o0: float) -> tuple[float, float, float]:
     """(slope, offset, lateral tolerance) of a wire's plan trend ``off = o1·s + o0`` refitted
     twice to the points within 3 robust sigma of it (the tolerance, at least

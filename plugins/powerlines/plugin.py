@@ -345,6 +345,11 @@ def _run(inputs, params, ctx):
     # told those apart by height). Over several spans the Hough's fit is as good, and their pooled
     # trends turned ribbons' and bundles' lines the wrong way. The 3D layer keeps its frame
     lines = _realign(lines, geo, spans, params, hu, min_drift_m=SETTLE_DRIFT_M, max_spans=1)[0]
+    # over several spans, a drift of a quarter band_m is the Hough's line between a ribbon's
+    # phases (their points in its band): the trend of the line's own wire, not the others' pieces
+    # it holds, settles it
+    lines = _realign(lines, geo, _main_wire_spans(spans, params["max_rms_3d_m"]), params, hu,
+                     min_drift_m=params["band_m"] / 4)[0]
     cond = lines["conductors"]
     # attributes of the 2D conductors: heights above ground of their 3D points
     hmin, hmax = [], []
@@ -377,8 +382,18 @@ def _run(inputs, params, ctx):
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
     bounds = (float(pc.x.min()) * hu, float(pc.y.min()) * hu, float(pc.x.max()) * hu, float(pc.y.max()) * hu)
+    # how far each conductor's wire points reach along it: the growth and the later passes take
+    # points past the Hough line's extent (a wire seen again near its pole, past a gap)
+    wire_reach = []
+    for li, g in enumerate(cond.geometry):
+        own = np.flatnonzero(conductor_of == li)
+        a = np.asarray(g.coords[0], float)[:2] * hu
+        d = np.asarray(g.coords[-1], float)[:2] * hu - a
+        d /= max(float(np.hypot(*d)), 1e-12)
+        t_own = (np.column_stack([pc.x[own] * hu, pc.y[own] * hu]) - a) @ d
+        wire_reach.append((a + t_own.min() * d, a + t_own.max() * d) if len(own) else None)
     crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found,
-                              bounds=bounds)
+                              bounds=bounds, wire_reach=wire_reach)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
               "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
@@ -835,7 +850,7 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
 
     import numpy as np
 
-    from .core import WIRE_LATERAL_RMS_M, band_owner, conductors_3d, twin_lines
+    from .core import band_owner, conductors_3d, thin_across, twin_lines
 
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     t = time.perf_counter()
@@ -899,7 +914,7 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     # is thin across the line and hangs gently (pylon members, roof edges and a crown's edge are
     # straight in plan but not wires); shorter pieces only add wire points to a conductor that has one
     good = {sp.conductor for sp in spans if sp.rms <= params["max_rms_3d_m"] and sp.s_to - sp.s_from >= params["s_min_m"]
-            and sp.offset_rms <= WIRE_LATERAL_RMS_M
+            and thin_across(sp)
             and abs(np.sinh((sp.s_to - sp.s0) / sp.c)) <= 0.5 and abs(np.sinh((sp.s_from - sp.s0) / sp.c)) <= 0.5}
     if sparse and len(lines["conductors"]):  # (an empty layer has no columns)
         # a line validated only at its own spacing is a wire standing clear in the air (an earth
@@ -1019,6 +1034,20 @@ def _plan_trends(spans, params) -> dict:
         agree = bool(w @ (slope - trend) ** 2 <= 9.0 * max(len(w) - 1, 1))
         out[li] = (trend, agree, w, mid, off, n)
     return out
+
+
+def _main_wire_spans(spans, max_rms: float) -> list:
+    """The spans (those that fit, within ``max_rms``) of each line's main wire: the one whose
+    fitting spans hold the most points."""
+    held = {}
+    for sp in spans:
+        if sp.rms <= max_rms:
+            held[(sp.conductor, sp.wire)] = held.get((sp.conductor, sp.wire), 0) + sp.n_points
+    main = {}
+    for (li, w), n in sorted(held.items()):
+        if li not in main or n > held[(li, main[li])]:
+            main[li] = w
+    return [sp for sp in spans if sp.rms <= max_rms and main.get(sp.conductor) == sp.wire]
 
 
 def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None, max_spans: int | None = None):
@@ -1455,14 +1484,16 @@ def _circuit_reach(lines, checks, max_angle_deg: float = 1.0, across_m: float = 
     return out
 
 
-def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None):
+def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None, wire_reach=None):
     """The ``crossings`` layer of the final conductors, whichever pass found them: pairs of plan
     lines (``cond``) confirmed by their extents or (``segments``, the paper) by their validated
     ``segs``, as the Hough confirms its own. A crossing the Hough merged with a line dropped
     later (a tower member through the same point) is then still a crossing of the lines kept.
     A line that ends at a found tower or pole (``found``; its footprint's reach and 3 m), or
     where its circuit ends (``_circuit_ends`` within the data's ``bounds``), crosses nothing past
-    that end; a line reaches at least as far as its circuit's other conductors (``_circuit_reach``)."""
+    that end; a line reaches at least as far as its circuit's other conductors (``_circuit_reach``)
+    and, validated by extent, as its own wire points (``wire_reach``: per line, the ends of their
+    extent along it, or None)."""
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point
@@ -1472,14 +1503,30 @@ def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None)
     def ends(g):
         return np.asarray(g.coords[0], float)[:2] * hu, np.asarray(g.coords[-1], float)[:2] * hu
 
+    supports = [(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found]
+
+    def short_of_supports(q, a, d, side):
+        # a wire seen up to a found support ends at it: its reach is held one beyond_m (crossings'
+        # default, 1 m) short of the support, which crossings() carries to the support, no farther
+        out = side * float((q - a) @ d)
+        for x, y, r in supports:
+            if np.hypot(q[0] - x, q[1] - y) <= r:
+                out = min(out, side * float((np.array([x, y]) - a) @ d) - 1.0)
+        return a + side * out * d
+
     lines, checks = [], []
     for i, g in enumerate(cond.geometry):
         a, b = ends(g)
         lines.append((a, (b - a) / max(float(np.hypot(*(b - a))), 1e-12)))
         checks.append([(a, b)] if validation == "extent" else
                       [ends(s) for s in segs.geometry[(segs["conductor"] == i).to_numpy()]])
+        if validation == "extent" and wire_reach is not None and wire_reach[i] is not None:
+            # at a found support the support's rule says where the line ends: wire points on its
+            # arm or top would carry it past the support onto the line beside it
+            w0, w1 = (np.asarray(w, float) for w in wire_reach[i])
+            d = lines[-1][1]
+            checks[-1].append((short_of_supports(w0, a, d, -1.0), short_of_supports(w1, a, d, 1.0)))
     checks = _circuit_reach(lines, checks)
-    supports = [(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found]
     if bounds is not None:
         supports += _circuit_ends(lines, checks, bounds)
     cross = crossings(lines, checks, supports=supports)
