@@ -3508,3 +3508,74 @@ def test_wire_points_on_a_found_support_carry_a_line_to_it_not_past_it():
     over = [None, (np.array([50.0, -40.0]), np.array([50.0, 0.4]))]
     got = _crossings_of(cond, segs, "extent", 1.0, found=[pole(50.0, 0.33)], wire_reach=over)
     assert len(got) == 1 and got.geometry[0].distance(gpd.points_from_xy([50.0], [0.0])[0]) < 1e-6
+
+
+def test_a_crown_wider_than_a_pole_over_a_bare_gap_is_no_pylon_a_lattice_or_a_sparse_pole_is():
+    """Two wires of a line 7.5 m up end at the edge of a crown as tall (comm4_d5 seed 9: their
+    pieces lost in it): under its line, as high as its wires, a column where spans end; only its
+    points, none below 3.5 m of its 8 over a body wider than a pole, tell it from a support. A
+    lattice on the same spot reaches the ground, and a pole's few points may leave its foot bare."""
+    from toolbox_plugins.powerlines.core import find_pylons
+
+    rng = np.random.default_rng(5)
+    r, a = 1.3 * np.sqrt(rng.uniform(0, 1, 3000)), rng.uniform(0, 2 * np.pi, 3000)
+    crown = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(3.5, 8.0, 3000)])
+    t = np.linspace(0.0, 1.0, 160)
+    legs = [np.column_stack([sx * (1.95 - 0.4 * t), sy * (1.95 - 0.4 * t), 8.0 * t]) for sx in (-1, 1) for sy in (-1, 1)]
+    u = np.linspace(-1.5, 1.5, 60)
+    braces = [np.column_stack([u, np.full(60, v), np.full(60, 8.0)]) for v in (-1.5, 1.5)] + \
+        [np.column_stack([np.full(60, v), u, np.full(60, 8.0)]) for v in (-1.5, 1.5)]
+    lattice = np.vstack(legs + braces)
+    pole = np.column_stack([rng.normal(0, 0.05, 10), rng.normal(0, 0.05, 10), np.linspace(4.2, 8.0, 10)])
+    ends, span_lines = [], []
+    for sign in (-1.0, 1.0):
+        e0, e1 = np.array([sign * 1.8, 0.0]), np.array([sign * 60.0, 0.0])
+        ends += [e0, e1]
+        span_lines.append((e0, e1))
+    ends, end_hag = np.array(ends), np.full(len(ends), 7.5)
+    lines_xy = [(np.array([-60.0, 0.0]), np.array([60.0, 0.0]))]
+    s = np.r_[np.arange(-60.0, -1.8, 0.3), np.arange(1.8, 60.0, 0.3)]
+    args = dict(span_lines=span_lines, max_rugged=1.0, wire_xyh=(s, np.zeros(len(s)), np.full(len(s), 7.5)))
+
+    def found(p, **kw):
+        return find_pylons(p[:, 0], p[:, 1], p[:, 2], ends, end_hag, [0.0], lines_xy, **{**args, **kw})
+
+    assert found(crown) == []
+    assert len(found(crown, reach_down_share=1.0)) == 1
+    got = found(lattice)
+    assert len(got) == 1 and np.hypot(got[0].x, got[0].y) <= 1.0 and len(got[0].cells) > 4
+    got = found(pole)
+    assert len(got) == 1 and np.hypot(got[0].x, got[0].y) <= 1.0
+
+
+def test_a_bush_under_a_ribbon_with_wire_points_left_over_it_is_no_tower_passed_through():
+    """A bush 2.3-5.2 m tall under a ribbon 10 m up, 18 of the wires' points over it left on no
+    wire (ribbon04 seed 9): tall, a column, reaching down, under its lines; only the 4.8 m gap
+    between the bush and the points over it says no body holds the wires. A sparse pole's few
+    points leave such gaps (distribution seed 4: 3.2 m): under its gap stands no more than a pole."""
+    from toolbox_plugins.powerlines.core import find_towers_passed_through
+
+    rng = np.random.default_rng(9)
+    r, a = 1.5 * np.sqrt(rng.uniform(0, 1, 400)), rng.uniform(0, 2 * np.pi, 400)
+    bush = np.column_stack([r * np.cos(a), r * np.sin(a), rng.uniform(2.3, 5.2, 400)])
+    left = np.column_stack([np.tile(np.linspace(-1.5, 1.5, 6), 3), np.repeat([-0.4, 0.0, 0.4], 6),
+                            rng.uniform(10.0, 10.1, 18)])
+    pts = np.vstack([bush, left])
+    s = np.r_[np.arange(-60.0, -1.8, 0.3), np.arange(1.8, 60.0, 0.3)]
+    wx, wy = np.tile(s, 3), np.repeat([-0.4, 0.0, 0.4], len(s))
+    wh = np.full(len(wx), 10.05)
+    lines_xy = [(np.array([-60.0, o]), np.array([60.0, o])) for o in (-0.4, 0.0, 0.4)]
+
+    def found(**kw):
+        return find_towers_passed_through(pts[:, 0], pts[:, 1], pts[:, 2], wx, wy, wh, [0.0] * 3, lines_xy,
+                                          max_rugged=1.0, **kw)
+
+    assert found() == []
+    got = found(max_gap_m=10.0)
+    assert len(got) == 1 and len(got[0].cells) > 4
+    pole = np.column_stack([rng.normal(0, 0.05, 11), rng.normal(0, 0.05, 11),
+                            [1.4, 2.2, 2.6, 5.8, 6.1, 6.3, 7.1, 7.4, 8.0, 8.0, 8.4]])
+    pts = np.vstack([pole, np.column_stack([left[:, :2], np.full(18, 8.0)])])  # its arm's points
+    wh = np.full(len(wx), 8.0)
+    got = found()
+    assert len(got) == 1 and np.hypot(got[0].x, got[0].y) <= 1.0

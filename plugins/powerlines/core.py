@@ -2480,7 +2480,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
                 max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
                 under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0,
-                wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0):
+                wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0,
+                reach_down_share: float = 0.35, pole_area_m2: float = 4.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -2507,7 +2508,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     (``wire_xyh``: x, y, hag), it stands at most ``max_height_share`` times as high as the
     highest of them within ``arm_m`` (a tree reaching over a low line, where the wire's pieces
     lost in its crown end, stands twice as high or more; a tower holds the earth wire at its
-    peak, a pole its top wire). The base is the median of its points (the middle of its column
+    peak, a pole its top wire). A candidate wider than a pole (its body over ``pole_area_m2``)
+    reaches down to ``reach_down_share`` of its height: a lattice's legs stand on the ground, a
+    crown where wire pieces end hangs over a gap (its trunk hidden); a pole's few points may
+    leave its foot bare. The base is the median of its points (the middle of its column
     cells leans to the side a street scan sees). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell).
@@ -2591,6 +2595,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
         if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
                                                max_side_ratio, cell_m):
+            continue
+        if len(body) * cell_m ** 2 > pole_area_m2 and \
+                float(hag[np.isin(flat, body)].min()) > reach_down_share * height:
             continue
         # its base where its points are: the middle of its column cells leans to the side a street
         # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
@@ -2739,7 +2746,8 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                                max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
                                known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
                                max_side_ratio: float = 2.0, insulator_m: float = 1.0,
-                               reach_down_share: float = 0.5) -> list:
+                               reach_down_share: float = 0.5, pole_area_m2: float = 4.0,
+                               max_gap_m: float = 2.0) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -2759,7 +2767,10 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     are trimmed 2-3 m below the wires), its points reach down to ``reach_down_share`` of its
     height (no span ends there to vouch for it, so its own body must: a support stands on the
     ground and is seen under its head, from the air as from the street, where a crown's cap
-    that a low line runs through hides its trunk), and it stands
+    that a low line runs through hides its trunk), hanging together that far (no gap over
+    ``max_gap_m``, as ``pylon_points`` takes a tower's points) unless what stands under the gap
+    is no wider than a pole (``pole_area_m2``: a sparse pole's points leave gaps; a bush under a
+    line with wire points left over it is wide), and it stands
     under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
     their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
     base."""
@@ -2803,6 +2814,12 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         # its arms reach out under the wires below its head (shorter than the tall cells' top)
         standing = structure & (top >= 0.5 * height)
         body = _grow_body(cells, standing.reshape(rows, cols), centres, centre, max(arm, arm_m))
+        mine = np.isin(flat, body) & (hag <= height + max_gap_m)  # not a stray point over its top
+        own = np.sort(hag[mine])[::-1]
+        gaps = np.flatnonzero(own[:-1] - own[1:] > max_gap_m)
+        if len(gaps) and float(own[gaps[0]]) > reach_down_share * height and \
+                len(np.unique(flat[mine & (hag < own[gaps[0]])])) * cell_m ** 2 > pole_area_m2:
+            continue
         if not _under_its_lines(centre[0], centre[1], centres[body], lines_xy, margin_m, under_line_m,
                                 max_side_ratio, cell_m):
             continue
