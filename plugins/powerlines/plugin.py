@@ -382,16 +382,7 @@ def _run(inputs, params, ctx):
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
     bounds = (float(pc.x.min()) * hu, float(pc.y.min()) * hu, float(pc.x.max()) * hu, float(pc.y.max()) * hu)
-    # how far each conductor's wire points reach along it: the growth and the later passes take
-    # points past the Hough line's extent (a wire seen again near its pole, past a gap)
-    wire_reach = []
-    for li, g in enumerate(cond.geometry):
-        own = np.flatnonzero(conductor_of == li)
-        a = np.asarray(g.coords[0], float)[:2] * hu
-        d = np.asarray(g.coords[-1], float)[:2] * hu - a
-        d /= max(float(np.hypot(*d)), 1e-12)
-        t_own = (np.column_stack([pc.x[own] * hu, pc.y[own] * hu]) - a) @ d
-        wire_reach.append((a + t_own.min() * d, a + t_own.max() * d) if len(own) else None)
+    wire_reach = _wire_reach(cond, conductor_of, pc, hu) if params["crossing_validation"] == "extent" else None
     crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found,
                               bounds=bounds, wire_reach=wire_reach)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
@@ -1036,6 +1027,27 @@ def _plan_trends(spans, params) -> dict:
     return out
 
 
+def _wire_reach(cond, conductor_of, pc, hu: float) -> list:
+    """Per conductor of ``cond``, how far its wire points (``conductor_of``) reach along it: the
+    two ends of their extent in plan (metres), or None where it holds none. The growth and the
+    later passes take points past the Hough line's extent (a wire seen again near its pole)."""
+    import numpy as np
+
+    n = len(cond)
+    if n == 0:
+        return []
+    a = np.array([np.asarray(g.coords[0], float)[:2] for g in cond.geometry]) * hu
+    d = np.array([np.asarray(g.coords[-1], float)[:2] for g in cond.geometry]) * hu - a
+    d /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
+    own = np.flatnonzero((conductor_of >= 0) & (conductor_of < n))
+    li = conductor_of[own]
+    t = (pc.x[own] * hu - a[li, 0]) * d[li, 0] + (pc.y[own] * hu - a[li, 1]) * d[li, 1]
+    t_min, t_max = np.full(n, np.inf), np.full(n, -np.inf)
+    np.minimum.at(t_min, li, t)
+    np.maximum.at(t_max, li, t)
+    return [(a[i] + t_min[i] * d[i], a[i] + t_max[i] * d[i]) if np.isfinite(t_min[i]) else None for i in range(n)]
+
+
 def _main_wire_spans(spans, max_rms: float) -> list:
     """The spans (those that fit, within ``max_rms``) of each line's main wire: the one whose
     fitting spans hold the most points."""
@@ -1504,14 +1516,15 @@ def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None,
         return np.asarray(g.coords[0], float)[:2] * hu, np.asarray(g.coords[-1], float)[:2] * hu
 
     supports = [(p.x, p.y, max(3.0, p.extent_m() + 1.0)) for p in found]
+    beyond_m = 1.0  # how far past its checked extent a line at a support reaches (crossings())
 
     def short_of_supports(q, a, d, side):
-        # a wire seen up to a found support ends at it: its reach is held one beyond_m (crossings'
-        # default, 1 m) short of the support, which crossings() carries to the support, no farther
+        # a wire seen up to a found support ends at it: its reach is held beyond_m short of the
+        # support, which crossings() carries to the support, no farther
         out = side * float((q - a) @ d)
         for x, y, r in supports:
             if np.hypot(q[0] - x, q[1] - y) <= r:
-                out = min(out, side * float((np.array([x, y]) - a) @ d) - 1.0)
+                out = min(out, side * float((np.array([x, y]) - a) @ d) - beyond_m)
         return a + side * out * d
 
     lines, checks = [], []
@@ -1529,7 +1542,7 @@ def _crossings_of(cond, segs, validation: str, hu: float, found=(), bounds=None,
     checks = _circuit_reach(lines, checks)
     if bounds is not None:
         supports += _circuit_ends(lines, checks, bounds)
-    cross = crossings(lines, checks, supports=supports)
+    cross = crossings(lines, checks, supports=supports, beyond_m=beyond_m)
     rows = [{"n_lines": k["n_lines"], "angle_deg": k["angle_deg"], "conductors": ",".join(map(str, k["lines"]))}
             for k in cross]
     geoms = gpd.GeoSeries([Point(k["x"] / hu, k["y"] / hu) for k in cross], crs=cond.crs)
