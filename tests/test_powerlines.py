@@ -3,6 +3,7 @@ vote), line detection and crossings against synthetic truth, the whole chain wit
 the real AHN4 corridor, and bad input."""
 
 import json
+from pathlib import Path
 
 import geopandas as gpd
 import laspy
@@ -2642,6 +2643,23 @@ def test_a_crown_cap_the_wires_run_through_is_no_tower_a_pole_reaching_down_is()
     found = find_towers_passed_through(pts[:, 0], pts[:, 1], pts[:, 2], w[:, 0], w[:, 1], w[:, 2], [70.9] * 2,
                                        lines_xy)
     assert len(found) == 1 and np.hypot(found[0].x - o[0], found[0].y - o[1]) <= 1.0, [(p.x, p.y) for p in found]
+
+
+def test_a_conifer_the_wires_run_through_is_no_tower_it_is_wider_than_a_pole_and_stands_off_the_ground():
+    """bundle3_d30 seed 9's false tower: a conifer 10.7 m tall that a triangle bundle's wires run
+    through (its points within 5 m and the wires' within 12 m, metres about it, heights above
+    ground; tests/data). Its points hang together down to 4.4 m, under half its height, so the
+    rule for poles passes it; but it is wider than a pole (over 4 m² of cells), and a support that
+    wide stands on the ground as at span ends (find_pylons: 0.35 of its height)."""
+    from toolbox_plugins.powerlines.core import find_towers_passed_through
+
+    d = np.load(Path(__file__).parent / "data" / "conifer_under_a_bundle.npz")
+    p, w = d["points_cm"] / 100.0, d["wires_cm"] / 100.0
+    lines_xy = [(ln[:2], ln[2:]) for ln in d["lines_m"]]
+    headings = list(d["headings_deg"])
+    assert find_towers_passed_through(*p.T, *w.T, headings, lines_xy) == []
+    found = find_towers_passed_through(*p.T, *w.T, headings, lines_xy, wide_reach_down_share=0.5)
+    assert len(found) == 1 and 0.4 < p[:, 2].min() / found[0].height_m < 0.5  # only this rule tells it
 
 
 def test_mobile_double_circuit_crossings_stop_at_the_last_pole(tmp_path):

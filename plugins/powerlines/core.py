@@ -2747,7 +2747,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                                known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
                                max_side_ratio: float = 2.0, insulator_m: float = 1.0,
                                reach_down_share: float = 0.5, pole_area_m2: float = 4.0,
-                               max_gap_m: float = 2.0) -> list:
+                               max_gap_m: float = 2.0, wide_reach_down_share: float = 0.35) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -2770,7 +2770,9 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     that a low line runs through hides its trunk), hanging together that far (no gap over
     ``max_gap_m``, as ``pylon_points`` takes a tower's points) unless what stands under the gap
     is no wider than a pole (``pole_area_m2``: a sparse pole's points leave gaps; a bush under a
-    line with wire points left over it is wide), and it stands
+    line with wire points left over it is wide); one wider than a pole reaches down to
+    ``wide_reach_down_share`` (as ``find_pylons`` asks: a lattice's legs stand on the ground, a
+    conifer the wires run through stands off it), and it stands
     under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
     their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
     base."""
@@ -2815,6 +2817,9 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         standing = structure & (top >= 0.5 * height)
         body = _grow_body(cells, standing.reshape(rows, cols), centres, centre, max(arm, arm_m))
         mine = np.isin(flat, body) & (hag <= height + max_gap_m)  # not a stray point over its top
+        # wider than a pole, as find_pylons asks at span ends: a lattice's legs stand on the ground
+        if len(body) * cell_m ** 2 > pole_area_m2 and float(hag[mine].min()) > wide_reach_down_share * height:
+            continue
         own = np.sort(hag[mine])[::-1]
         gaps = np.flatnonzero(own[:-1] - own[1:] > max_gap_m)
         if len(gaps) and float(own[gaps[0]]) > reach_down_share * height and \
