@@ -1416,6 +1416,40 @@ def test_a_sibling_search_takes_points_of_shorter_lines_only():
     assert sibling_wires(*args, owner=owner, owner_length=np.where(owner == 1, 60.0, 0.0)) == []
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_cables_one_over_another_under_a_fitted_span_are_found_and_a_slice_of_crown_is_not(seed):
+    """Two communication cables 0.3 and 0.6 m under a fitted span (a joint-use pole's stack, one
+    sag, a point every 0.4-1 m) come out over and under it (``stacked``), each with its own
+    points and none of the crown 1.5-3.5 m under the line; the search beside the span takes
+    none of their points, and the crown alone gives nothing: a slice through it fits a catenary and covers
+    the span, but the rest of the crown lies around it."""
+    from toolbox_plugins.powerlines.core import Span, sibling_wires
+
+    rng = np.random.default_rng(seed)
+    sp = Span(0, 0, 0, 30.0, 600.0, 10.0, 0.0, 60.0, 0.03, 300, 0.75)
+    cables = []
+    for dz in (-0.3, -0.6):
+        s = np.cumsum(rng.uniform(0.4, 1.0, 120))
+        s = s[s <= 60.0]
+        cables.append(np.column_stack([s, rng.normal(0, 0.03, len(s)),
+                                       catenary(s, 10.0 + dz, 30.0, 600.0) + rng.normal(0, 0.02, len(s))]))
+    crown = rng.uniform([0, -1.5, 0], [60, 1.5, 1], (4000, 3))
+    crown[:, 2] = catenary(crown[:, 0], 10.0, 30.0, 600.0) - 1.5 - 2.0 * crown[:, 2]
+    lines = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 60.0)]
+    p = np.vstack(cables + [crown])
+    label = np.r_[np.zeros(len(cables[0])), np.ones(len(cables[1])), np.full(len(crown), 2)]
+    found = sibling_wires([sp], lines, p[:, 0], p[:, 1], p[:, 2], 0.2, 0.4, 8.0, stacked=True)
+    assert len(found) == 2
+    assert sorted(int(np.bincount(label[k].astype(int)).argmax()) for k, *_ in found) == [0, 1]
+    for k, li, s, off in found:
+        cable = int(label[k[0]])
+        assert li == 0 and (label[k] == cable).all() and len(k) >= 0.9 * len(cables[cable])
+    assert all((label[k] == 2).all() for k, *_ in sibling_wires([sp], lines, p[:, 0], p[:, 1], p[:, 2], 0.2, 0.4, 8.0))
+    c = crown.T
+    assert sibling_wires([sp], lines, *c, 0.2, 0.4, 8.0, stacked=True) == []
+    assert len(sibling_wires([sp], lines, *c, 0.2, 0.4, 8.0, stacked=True, max_around=np.inf)) >= 1
+
+
 @pytest.mark.parametrize("order", ["reversed", "shuffled"])
 def test_peel_does_not_depend_on_the_order_of_the_points(order):
     """A survey's points come in the order they were scanned, not along the line: the sparse wire

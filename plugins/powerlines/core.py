@@ -1306,7 +1306,8 @@ def _stands_alone(q, around: _Around, max_around: float) -> bool:
 def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, min_span_m: float, owner=None,
                   owner_length=None, max_sep_m: float = 4.0, max_dz_m: float = 3.0, bin_m: float = 0.1, tol_m: float = 0.15,
                   min_points: int = 12, min_cover: float = 0.5, cover_bin_m: float = 2.0,
-                  max_rounds: int = 6) -> list:
+                  max_rounds: int = 6, stacked: bool = False, max_around: float = 0.5,
+                  plane_m: float = 0.16) -> list:
     """Wires hanging beside a fitted span, too sparse for the Hough and the 3D step to find alone
     (a mobile scanner's view of the far phase of a line crossing its street, 10-45 m away): the
     phases of one line hang side by side, parallel, with nearly the same sag, so beside each
@@ -1323,6 +1324,13 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
     With ``owner`` (the line each point is on, -1: none) and ``owner_length`` (that line's
     length), the points of lines shorter than the span's own line are searched too: the stretch
     of a sparse phase the Hough found alone near its pole.
+    With ``stacked``, the wires searched are over or under the span instead (within
+    ``min_sep_m`` across, out of its fit tolerance in height: 3 rms, at least ``tol_m``): the
+    cables of a joint-use pole hang one over another with one sag, a ribbon on end that the
+    shape test takes for a surface, and the 3D step may keep one of them. Such a wire stands
+    alone but in its vertical plane (``plane_m``): under ``max_around`` times its points lie
+    0.2-0.5 m from it elsewhere (as short_wires asks; a slice through the crowns under a line
+    has the rest of the crowns around it).
     Returns [(indices into p*, line index, s of those points, offset across)] per wire found.
     ``lines`` as for conductors_3d."""
     found = []
@@ -1338,7 +1346,10 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
             near = np.flatnonzero((s >= sp.s_from) & (s <= sp.s_to) & ~taken & open_)
             across = off[near] - (sp.offset + sp.offset_slope * s[near])
             dz = pz[near] - catenary(s[near], sp.z0, sp.s0, sp.c)
-            zone = (np.abs(across) >= min_sep_m) & (np.abs(across) <= max_sep_m) & (np.abs(dz) <= max_dz_m)
+            if stacked:
+                zone = (np.abs(across) < min_sep_m) & (np.abs(dz) > max(3 * sp.rms, tol_m)) & (np.abs(dz) <= max_dz_m)
+            else:
+                zone = (np.abs(across) >= min_sep_m) & (np.abs(across) <= max_sep_m) & (np.abs(dz) <= max_dz_m)
             near, across, dz = near[zone], across[zone], dz[zone]
             n_steps = int(np.ceil(length / cover_bin_m))
             for _ in range(max_rounds):
@@ -1369,7 +1380,8 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
                         break
                 cover = len(np.unique(np.floor((s[k] - sp.s_from) / cover_bin_m))) / n_steps if ok else 0.0
                 if (ok and cover >= min_cover and np.ptp(s[k]) >= min_span_m
-                        and fit_catenary(s[k], pz[k])[3] <= max_rms):
+                        and fit_catenary(s[k], pz[k])[3] <= max_rms
+                        and (not stacked or _alone_in_its_plane(k, s, off, pz, fit, (o1, o0), max_around, plane_m))):
                     found.append((k, li, s[k], off[k]))
                     taken[k] = True
                 # the window's points leave the search either way: the next round looks elsewhere
@@ -1378,6 +1390,17 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
                 gone[(ia >= ka) & (ia <= ka + 1) & (iz >= kz) & (iz <= kz + 1)] = True
                 near, across, dz = near[~gone], across[~gone], dz[~gone]
     return found
+
+
+def _alone_in_its_plane(k, s, off, z, fit, trend, max_around: float, plane_m: float) -> bool:
+    """Whether the wire of the points ``k`` (its catenary ``fit``, its plan ``trend`` (slope,
+    intercept) of ``off`` over ``s``) has under ``max_around`` times its points 0.2-0.5 m from it
+    over its extent among the points (``s``, ``off``, ``z``), leaving out those in its vertical
+    plane (within ``plane_m`` across: the other wires of its stack)."""
+    within = np.flatnonzero((s >= s[k].min()) & (s <= s[k].max()))
+    across = off[within] - trend[0] * s[within] - trend[1]
+    r = np.hypot(across, z[within] - catenary(s[within], *fit[:3]))
+    return int(((r > 0.2) & (r <= 0.5) & (np.abs(across) > plane_m)).sum()) < max_around * len(k)
 
 
 def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng, neighbours=None):

@@ -333,6 +333,15 @@ def _run(inputs, params, ctx):
         lines, geo, spans, conductor_of, wire_of_input = _keep_conductors(kept, lines, geo, spans, conductor_of,
                                                                           wire_of_input)
     timings["off_trend_s"] = time.perf_counter() - t
+    if params["sibling_wires"] and spans:
+        # one over another (a joint-use pole's cables), among every candidate: a stack's wires make
+        # a ribbon on end that the shape test takes for a surface (searched once the lines in a
+        # surface are gone: a facade's scan rows hang one over another under such a line)
+        t = time.perf_counter()
+        spans, n_stacked = _stacked_wires(pc, idx[(conductor_of[idx] < 0) & ~tower_pt[idx]], geo, spans,
+                                          conductor_of, wire_of_input, params, hu, vu)
+        n_sibling += n_stacked
+        timings["sibling_wires_s"] = timings.get("sibling_wires_s", 0.0) + time.perf_counter() - t
 
     # wires the 3D step told apart across one Hough line (a ribbon's phases closer than band_m)
     # are conductors of their own in plan
@@ -688,6 +697,29 @@ def _sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu,
     lines, geo, spans = _add_pass(_straight_conductors(pc, xyz[free], lines_xy, hu) if lines_xy else None, lines,
                                   geo, spans, line_of, wire_of_pt, hu, params)
     return lines, geo, spans, line_of, wire_of_pt, len(geo) - n_before
+
+
+def _stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, vu):
+    """``sibling_wires`` over and under the fitted spans among the points ``pool`` (indices into
+    ``pc``, on no wire), each added as a further wire of the span's conductor (one over another,
+    they are one line in plan): ``conductor_of`` and ``wire_of`` (per point of ``pc``) are
+    updated in place. Returns (spans, number added)."""
+    import numpy as np
+
+    from .core import _span, fit_catenary, sibling_wires
+
+    if len(pool) < 12 or not spans:
+        return spans, 0
+    xyz = np.column_stack([pc.x[pool] * hu, pc.y[pool] * hu, pc.z[pool] * vu])
+    found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
+                          params["s_min_m"], stacked=True)
+    spans = list(spans)
+    for k, li, s, off in found:
+        wire = 1 + max([sp.wire for sp in spans if sp.conductor == li] +
+                       [int(wire_of[conductor_of == li].max(initial=-1))])
+        spans.append(_span(li, wire, 0, s, off, fit_catenary(s, xyz[k, 2]), xyz[k, 2]))
+        conductor_of[pool[k]], wire_of[pool[k]] = li, wire
+    return spans, len(found)
 
 
 def _labels_of_low(low, keep, line_of, wire_of_pt, n_points):
@@ -1681,7 +1713,8 @@ def toolbox_algorithms():
                       "from a pole"),
             Parameter("sibling_wires", bool, True, "search beside each fitted span (band_m to 4 m across, 3 m up "
                       "or down) for a phase too sparse to find alone: points at one offset across it and one height "
-                      "above its catenary, a catenary of their own over half the span or more"),
+                      "above its catenary, a catenary of their own over half the span or more; and over and under "
+                      "it (within band_m across) for the cables of a stack, each standing alone but in its plane"),
             Parameter("grow_spans", bool, True, "continue each fitted span's catenary past its ends and take the "
                       "points on it (within 0.25 m in plan and the fit's tolerance, no gap over 2 x v_max_m, up to "
                       "2 x s_min_m): a wire under the height window or next to a tower"),
