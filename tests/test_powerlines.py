@@ -1447,6 +1447,7 @@ def test_cables_one_over_another_under_a_fitted_span_are_found_and_a_slice_of_cr
     assert all((label[k] == 2).all() for k, *_ in sibling_wires([sp], lines, p[:, 0], p[:, 1], p[:, 2], 0.2, 0.4, 8.0))
     c = crown.T
     assert sibling_wires([sp], lines, *c, 0.2, 0.4, 8.0, stacked=True) == []
+    assert sibling_wires([sp], lines, *c, 0.2, 0.4, 8.0, stacked=True, min_cover=0.0) == []  # as the run asks
     assert len(sibling_wires([sp], lines, *c, 0.2, 0.4, 8.0, stacked=True, max_around=np.inf)) >= 1
 
 

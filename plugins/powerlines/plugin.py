@@ -711,8 +711,10 @@ def _stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, vu):
     if len(pool) < 12 or not spans:
         return spans, 0
     xyz = np.column_stack([pc.x[pool] * hu, pc.y[pool] * hu, pc.z[pool] * vu])
+    # (S_min long, but covering no share of the span: the cables of a stack hide one another
+    # over stretches, and a leftover stub of the span's own wire is inside its fit tolerance)
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
-                          params["s_min_m"], stacked=True)
+                          params["s_min_m"], stacked=True, min_cover=0.0)
     spans = list(spans)
     for k, li, s, off in found:
         wire = 1 + max([sp.wire for sp in spans if sp.conductor == li] +
