@@ -715,12 +715,17 @@ def _stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, vu):
     # over stretches, and a leftover stub of the span's own wire is inside its fit tolerance)
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
                           params["s_min_m"], stacked=True, min_cover=0.0)
+    # each conductor's highest wire number so far (its spans' and its points'), found once
+    top = np.full(len(geo), -1, np.int64)
+    on = conductor_of >= 0
+    np.maximum.at(top, conductor_of[on], wire_of[on])
+    for sp in spans:
+        top[sp.conductor] = max(top[sp.conductor], sp.wire)
     spans = list(spans)
     for k, li, s, off in found:
-        wire = 1 + max([sp.wire for sp in spans if sp.conductor == li] +
-                       [int(wire_of[conductor_of == li].max(initial=-1))])
-        spans.append(_span(li, wire, 0, s, off, fit_catenary(s, xyz[k, 2]), xyz[k, 2]))
-        conductor_of[pool[k]], wire_of[pool[k]] = li, wire
+        top[li] += 1
+        spans.append(_span(li, int(top[li]), 0, s, off, fit_catenary(s, xyz[k, 2]), xyz[k, 2]))
+        conductor_of[pool[k]], wire_of[pool[k]] = li, int(top[li])
     return spans, len(found)
 
 
