@@ -516,6 +516,70 @@ def test_bundle_split_follows_the_wires_trend_not_the_pieces():
         assert np.mean(mine == main) >= 0.97 and np.mean(label[lab == main] == k) >= 0.97
 
 
+def _ribbon_points(rng, offsets, length_m=500.0, per_m=2.0, sd_m=0.04, heading_deg=20.0):
+    """Plan points of wires side by side (``offsets`` across a line at ``heading_deg``), and the
+    line's frame (anchor, direction, normal)."""
+    d = np.array([np.cos(np.radians(heading_deg)), np.sin(np.radians(heading_deg))])
+    n = np.array([-d[1], d[0]])
+    a = np.array([1000.0, 2000.0])
+    pts, lab = [], []
+    for k, o in enumerate(offsets):
+        s = rng.uniform(0.0, length_m, int(per_m * length_m))
+        pts.append(a + s[:, None] * d + (o + rng.normal(0, sd_m, len(s)))[:, None] * n)
+        lab.append(np.full(len(s), k))
+    return np.vstack(pts), np.concatenate(lab), (a, d, n)
+
+
+def _line_between(frame, off_from, off_to, length_m):
+    """A line of the frame (anchor, direction, normal) leaning from ``off_from`` to ``off_to``
+    across over ``length_m``: (anchor, direction, 0, length)."""
+    a, d, n = frame
+    b = a + off_from * n
+    e = a + length_m * d + off_to * n
+    u = (e - b) / np.linalg.norm(e - b)
+    return (b, u, 0.0, float(np.linalg.norm(e - b)))
+
+
+def test_ribbon_lines_redraw_the_houghs_lines_between_three_wires_one_per_wire():
+    """Three wires 0.3 m apart over 500 m (a horizontal three-phase line) and the Hough's two
+    lines drawn between them, one leaning from the middle wire to the outer one (0.3 m over the
+    corridor, 0.03 deg): one line per wire, each within 3 cm of its wire at both ends."""
+    from toolbox_plugins.powerlines.core import ribbon_lines
+
+    rng = np.random.default_rng(3)
+    offsets = [-0.3, 0.0, 0.3]
+    pts, _, frame = _ribbon_points(rng, offsets)
+    lines = [_line_between(frame, 0.3, 0.0, 500.0), _line_between(frame, -0.15, -0.15, 500.0)]
+    got = ribbon_lines(lines, pts[:, 0], pts[:, 1], 0.4, 8.0, 5.0)
+    assert got is not None
+    new, source = got
+    assert len(new) == 3 and set(source) <= {0, 1}
+    a, d, n = frame
+    for o in offsets:
+        ends = [np.array([(b + t * u - a) @ n for t in (t0, t1)]) for b, u, t0, t1 in new]
+        assert sum(np.all(np.abs(e - o) <= 0.03) for e in ends) == 1
+    for b, u, t0, t1 in new:  # each over the ribbon's length
+        assert t1 - t0 >= 490.0
+
+
+def test_ribbon_lines_leave_lines_on_their_wires_and_a_scattered_bundle_alone():
+    """Lines already one per wire are left as they are; so are a pair of sub-conductors 0.46 m
+    apart whose scatter across (0.1 m, an airborne survey's) fills the gap between them (the
+    Hough's line between them is as good as any), and short lines (a tower's members)."""
+    from toolbox_plugins.powerlines.core import ribbon_lines
+
+    rng = np.random.default_rng(4)
+    pts, _, frame = _ribbon_points(rng, [-0.3, 0.0, 0.3])
+    lines = [_line_between(frame, o, o, 500.0) for o in (-0.3, 0.0, 0.3)]
+    assert ribbon_lines(lines, pts[:, 0], pts[:, 1], 0.4, 8.0, 5.0) is None
+    pts, _, frame = _ribbon_points(rng, [-0.23, 0.23, 5.0, 5.46, 10.0, 10.46], sd_m=0.1)
+    lines = [_line_between(frame, o, o, 500.0) for o in (0.0, 5.23, 10.23)]
+    assert ribbon_lines(lines, pts[:, 0], pts[:, 1], 0.4, 8.0, 5.0) is None
+    pts, _, frame = _ribbon_points(rng, [-0.3, 0.0, 0.3], length_m=25.0, per_m=20.0)
+    lines = [_line_between(frame, 0.3, 0.0, 25.0), _line_between(frame, -0.15, -0.15, 25.0)]
+    assert ribbon_lines(lines, pts[:, 0], pts[:, 1], 0.4, 8.0, 5.0) is None
+
+
 def test_windowed_groups_link_wires_that_move_together():
     """Three wires 0.4 m apart whose offsets swing together 0.3 m along 300 m (the third over its
     first 80 m only): window by window (50 m) each cuts cleanly about its own straight trend and
@@ -2244,7 +2308,9 @@ def test_ribbon_corridor_at_default_parameters(tmp_path):
     ("r04", 4, {"line_variant": "ribbon", "phase_spacing_m": 0.4}, 5),
     ("b3", 4, {"bundle": 3, "bundle_spacing_m": 0.4}, 10),
     ("b3", 2, {"bundle": 3, "bundle_spacing_m": 0.4}, 10),
-    ("r04d5", 8, {"line_variant": "ribbon", "phase_spacing_m": 0.4, "density_ppm2": 5.0}, 5)])
+    ("r04d5", 8, {"line_variant": "ribbon", "phase_spacing_m": 0.4, "density_ppm2": 5.0}, 5),
+    ("r03", 17, {"line_variant": "ribbon", "phase_spacing_m": 0.3}, 5),
+    ("r04", 16, {"line_variant": "ribbon", "phase_spacing_m": 0.4}, 5)])
 def test_ribbons_and_bundles_have_every_phase(tmp_path, stem, seed, variant, n_conductors):
     """Ribbons and triangle bundles on generator seed 4 (which the variant family's seeds 1-3 do
     not cover) and bundles on seed 2: every conductor once, none false, every crossing within
@@ -2256,7 +2322,11 @@ def test_ribbons_and_bundles_have_every_phase(tmp_path, stem, seed, variant, n_c
     10, crossings 15 of 21); on seed 2 a 10 m stub at a tower merged as the bundle's twin turned
     its line by 0.01 deg while the stub's ends weighed as much as the line's (8 of 10); the
     0.4 m ribbon at 5 points/m² on seed 8: in a 373 m piece the phases' offsets moved together
-    0.2-0.3 m along it, which no straight trend removes (4 of 5, R 0.888, crossings 4 of 6)."""
+    0.2-0.3 m along it, which no straight trend removes (4 of 5, R 0.888, crossings 4 of 6).
+    Seeds 17 and 16, first run after those fixes (held out: 6 of 20 scenes of the 0.3 and 0.4 m
+    ribbons on seeds 15-24 failed so): one Hough line over all three 0.3 m phases (3 of 5,
+    crossings 2 of 6), and the 0.4 m ribbon's lines leaning across the phases (4 of 5, R 0.879);
+    ``ribbon_lines`` now redraws such lines one per wire."""
     path = tmp_path / f"{stem}.laz"
     toolbox.run("synthetic-scene", output=path, kind="corridor", seed=seed, **variant)
     truth = json.loads(path.with_name(f"{stem}_truth.json").read_text())

@@ -773,6 +773,201 @@ def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
     return float(np.mean(around)) <= max_around
 
 
+def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: float,
+                 min_gap_m: float = SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5, search_deg: float = 0.2,
+                 step_deg: float = 0.005, bin_m: float = 0.02, peak_m: float = 0.06, min_points: int = 20,
+                 match_m: float = 0.05, min_wires: int = 3, min_share: float = 0.75):
+    """The Hough's lines over a ribbon redrawn one per wire: wires side by side closer than twice
+    ``band_m`` (a horizontal three-phase line 0.3-0.4 m apart) put several into one band, and the
+    Hough draws a line between two of them, leaning from one to the next over the corridor
+    (a 0.03 deg lean is 0.3 m over 600 m); which ones it joins changes from tile to tile.
+
+    ``lines``: [(anchor, direction, t_from, t_to)] in metres; p*: the candidates (metres). Lines
+    within ``max_angle_deg`` of one another and within twice ``band_m`` across, overlapping
+    along, form a group; its band's points, in the frame of its longest line, are turned by the
+    angle (within ``search_deg``, ``step_deg`` steps) that stacks their offsets across most
+    sharply (wires side by side are parallel and straight in plan: the sum of squared counts of
+    ``bin_m`` bins). Peaks of that histogram holding ``min_points`` within ``peak_m``, their points
+    running ``min_length_m`` along (gaps under ``max_gap_m``), are the wires in plan; peaks closer
+    than ``min_gap_m`` are one (a bundle's sub-conductors stay one conductor per phase, as
+    ``_split_bundles`` keeps them). Only lines ``4 * min_length_m`` or longer take part (a tower's
+    members stay out), a wire runs along half the longest line or more, and a group is redrawn
+    where it holds ``min_wires`` wires or more (two side by side the 3D step tells apart, as a
+    bundle's pair) that hold ``min_share`` of its band's points (an airborne survey's scatter
+    across a wire, as wide as the gaps between them, leaves the Hough's lines as good as any)
+    and its lines are not already one per wire, each within ``match_m`` of it at both ends. A
+    line reaching out of the ribbon stays.
+
+    Returns (lines, source) with each group redrawn (source: per returned line, the index of the
+    input line nearest it, whose attributes it takes), or None where no group changed."""
+    n = len(lines)
+    if n == 0:
+        return None
+    dirs = np.array([d for _, d, _, _ in lines])
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    cos_lim = np.cos(np.radians(max_angle_deg))
+    long_ = [lines[k][3] - lines[k][2] >= 4 * min_length_m for k in range(n)]  # (a tower's members stay out)
+    for i in range(n):
+        a, d, t0, t1 = lines[i]
+        nrm = np.array([-d[1], d[0]])
+        for j in range(i + 1, n):
+            if not (long_[i] and long_[j]) or abs(float(dirs[i] @ dirs[j])) < cos_lim:
+                continue
+            b, e, u0, u1 = lines[j]
+            ends = np.array([b + u0 * e, b + u1 * e])
+            along = np.sort((ends - a) @ d)
+            if along[1] < t0 or along[0] > t1:
+                continue
+            if np.abs((ends - a) @ nrm).max() <= 2 * band_m:
+                parent[root(j)] = root(i)
+    groups = {}
+    for i in range(n):
+        groups.setdefault(root(i), []).append(i)
+    out, source, changed = [], [], False
+    pts = np.column_stack([px, py])
+    for members in groups.values():
+        redrawn = _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg,
+                                step_deg, bin_m, peak_m, min_points, match_m, min_wires, min_share) \
+            if long_[members[0]] else None
+        if redrawn is None:
+            out += [lines[k] for k in members]
+            source += members
+        else:
+            changed = True
+            out += [ln for ln, _ in redrawn]
+            source += [k for _, k in redrawn]
+    return (out, source) if changed else None
+
+
+def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg, step_deg, bin_m,
+                  peak_m, min_points, match_m, min_wires, min_share):
+    """One group of ``ribbon_lines``: [(line, source index)] redrawn, or None (left as it is)."""
+    main = max(members, key=lambda k: lines[k][3] - lines[k][2])
+    a, d, _, _ = lines[main]
+    longest = lines[main][3] - lines[main][2]
+    nrm = np.array([-d[1], d[0]])
+    inside = np.zeros(len(pts), bool)
+    for k in members:
+        b, e, u0, u1 = lines[k]
+        rel = pts - b
+        t = rel @ e
+        inside |= (np.abs(rel @ np.array([-e[1], e[0]])) <= band_m) & (t >= u0 - band_m) & (t <= u1 + band_m)
+    if inside.sum() < 2 * min_points:
+        return None
+    rel = pts[inside] - a
+    s, o = rel @ d, rel @ nrm
+    sc = s - np.median(s)  # turn about the middle: the offsets stay where they are there
+    best, best_phi = -1.0, 0.0
+    for phi in np.radians(np.arange(-search_deg, search_deg + step_deg / 2, step_deg)):
+        turned = o - phi * sc
+        h = np.bincount(((turned - turned.min()) / bin_m).astype(np.int64))
+        score = float(h @ h)
+        if score > best:
+            best, best_phi = score, phi
+    oc = o - best_phi * sc
+    lo, hi = float(oc.min()) - 2 * bin_m, float(oc.max()) + 2 * bin_m
+    nb = int(np.ceil((hi - lo) / bin_m)) + 1
+    h = np.bincount(((oc - lo) / bin_m).astype(np.int64).clip(0, nb - 1), minlength=nb).astype(float)
+    hs = np.convolve(h, [1.0, 2.0, 1.0], mode="same")
+    peaks = [i for i in range(1, nb - 1) if hs[i] > 0 and hs[i] >= hs[i - 1] and hs[i] > hs[i + 1]]
+    wires = []  # (centre, points) of the peaks holding a wire
+    for i in peaks:
+        c = lo + (i + 0.5) * bin_m
+        near = np.abs(oc - c) <= peak_m
+        if near.sum() < min_points:
+            continue
+        c = float(np.median(oc[near]))
+        near = np.abs(oc - c) <= peak_m
+        runs = _runs(s[near], max_gap_m, min_length_m)
+        # a wire of the ribbon runs along most of it (not a stub of an arm or a jumper)
+        if sum(r[1] - r[0] for r in runs) < 0.5 * longest:
+            continue
+        wires.append((c, int(near.sum())))
+    if not wires:
+        return None
+    wires.sort()
+    # peaks closer than min_gap_m are one wire (a bundle's), at their points' weighted middle
+    merged = [[wires[0]]]
+    for w in wires[1:]:
+        if w[0] - merged[-1][-1][0] < min_gap_m:
+            merged[-1].append(w)
+        else:
+            merged.append([w])
+    if len(merged) < min_wires:
+        return None
+    centres = [sum(c * m for c, m in g) / sum(m for _, m in g) for g in merged]
+    on_wires = np.abs(oc[:, None] - np.array([c for g in merged for c, _ in g])[None, :]).min(axis=1) <= peak_m
+    if on_wires.mean() < min_share:
+        return None
+    # each wire's own line: its points (within peak_m, or within half the gap to its neighbours
+    # for a merged bundle) refitted along the turned frame
+    redrawn = []
+    for g, c in zip(merged, centres):
+        half = max(peak_m, 0.5 * (g[-1][0] - g[0][0]) + peak_m)
+        mine = np.abs(oc - c) <= half
+        runs = _runs(s[mine], max_gap_m, min_length_m)
+        if not runs:
+            continue
+        t0, t1 = min(r[0] for r in runs), max(r[1] for r in runs)
+        on = mine & (s >= t0) & (s <= t1)
+        slope, icpt = line_fit(s[on], o[on])
+        d2 = (d + slope * nrm) / np.hypot(1.0, slope)
+        a2 = a + t0 * d + (icpt + slope * t0) * nrm
+        redrawn.append(((a2, d2, 0.0, float((t1 - t0) * np.hypot(1.0, slope))), (slope, icpt, t0, t1)))
+    if not redrawn:
+        return None
+    # each input line's offsets at its ends, in the group's frame
+    def ends_of(k):
+        b, e, u0, u1 = lines[k]
+        p = np.array([b + u0 * e, b + u1 * e]) - a
+        return p @ d, p @ nrm
+    matched = set()
+    for k in members:
+        ss, oo = ends_of(k)
+        hit = [w for w, (_, (sl, ic, _, _)) in enumerate(redrawn) if np.all(np.abs(oo - (sl * ss + ic)) <= match_m)]
+        if len(hit) != 1 or hit[0] in matched:
+            break
+        matched.add(hit[0])
+    else:
+        if len(matched) == len(redrawn) == len(members):
+            return None
+    def offset_at(k, at):  # input line k's offset where it passes along-position ``at``
+        b, e, _, _ = lines[k]
+        t = (at - float((b - a) @ d)) / max(float(e @ d), 1e-9)
+        return float((b - a) @ nrm) + t * float(e @ nrm)
+
+    out = []
+    for ln, (sl, ic, t0, t1) in redrawn:
+        mid = 0.5 * (t0 + t1)
+        out.append((ln, min(members, key=lambda k: abs(offset_at(k, mid) - (sl * mid + ic)))))
+    # a line reaching out of the ribbon (another wire beside it, under min_length_m of it in
+    # the band) stays
+    for k in members:
+        ss, oo = ends_of(k)
+        across = np.array([sl * ss + ic for _, (sl, ic, _, _) in redrawn])
+        if np.any(oo < across.min(axis=0) - 0.5 * min_gap_m) or np.any(oo > across.max(axis=0) + 0.5 * min_gap_m):
+            out.append((lines[k], k))
+    return out
+
+
+def _runs(t, max_gap_m: float, min_length_m: float) -> list:
+    """(first, last) of the runs of the positions ``t`` with every gap under ``max_gap_m``, at
+    least ``min_length_m`` long."""
+    if len(t) < 2:
+        return []
+    t = np.sort(t)
+    cut = np.flatnonzero(np.diff(t) >= max_gap_m)
+    firsts, lasts = np.r_[t[0], t[cut + 1]], np.r_[t[cut], t[-1]]
+    return [(float(f), float(g)) for f, g in zip(firsts, lasts) if g - f >= min_length_m]
+
+
 def twin_lines(spans, lines, max_rms: float, min_span_m: float, band_m: float,
                across_m: float = 0.5 * SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5) -> list[tuple[int, int]]:
     """Pairs of lines (i < j; ``lines``: [(anchor, direction, t_from, t_to)]) whose bands share a

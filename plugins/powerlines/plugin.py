@@ -880,7 +880,7 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
 
     import numpy as np
 
-    from .core import band_owner, conductors_3d, thin_across, twin_lines
+    from .core import band_owner, conductors_3d, ribbon_lines, thin_across, twin_lines
 
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     t = time.perf_counter()
@@ -911,6 +911,13 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
         L = float(np.hypot(*d))
         geo.append((a, d / L, 0.0, L))
     px, py = pc.x[keep] * hu, pc.y[keep] * hu
+    # three or more wires side by side within twice band_m (a horizontal three-phase line): the
+    # Hough's lines lie between them, leaning from one to the next; one line per wire instead
+    redrawn = ribbon_lines(geo, px, py, params["band_m"] * hu, params["s_min_m"], 2 * params["v_max_m"])
+    if redrawn is not None:
+        geo, source = redrawn
+        lines = _redrawn_lines(lines, geo, source, hu)
+        timings["n_ribbon_lines_added"] = timings.get("n_ribbon_lines_added", 0) + len(geo) - len(set(source))
 
     def step_3d(geo, only=None):
         return conductors_3d(
@@ -981,6 +988,36 @@ def _stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) -
     around = np.union1d(around, own)
     xyz = np.column_stack([x[around], y[around], pc.z[around] * vu])
     return _stands_clear(xyz, np.searchsorted(around, own), radius_m, STANDS_CLEAR_MAX)
+
+
+def _redrawn_lines(lines, geo, source, hu):
+    """The Hough's layers for the lines ``geo`` (anchor, direction, from, to; metres) that
+    ``ribbon_lines`` redrew: each takes the attributes of its ``source`` line, its own geometry
+    and one segment over its extent."""
+    import geopandas as gpd
+    import numpy as np
+    import pandas as pd
+    from shapely.geometry import LineString
+
+    cond, seg = lines["conductors"], lines["conductor_segments"]
+    rows, segs = [], []
+    for k, ((a, d, t0, t1), src) in enumerate(zip(geo, source)):
+        ends = [tuple((a + t * d) / hu) for t in (t0, t1)]
+        row = cond.iloc[src].copy()
+        row["conductor"] = k
+        row["geometry"] = LineString(ends)
+        if "length_m" in row.index:
+            row["length_m"] = float(t1 - t0)
+        if "azimuth_deg" in row.index:
+            row["azimuth_deg"] = float(np.degrees(np.arctan2(d[0], d[1])) % 180.0)
+        rows.append(row)
+        segs.append({"conductor": k, "segment": 0, "length_m": float(t1 - t0), "geometry": LineString(ends)})
+    out_c = gpd.GeoDataFrame(pd.DataFrame(rows).reset_index(drop=True), geometry="geometry", crs=cond.crs)
+    out_s = gpd.GeoDataFrame(pd.DataFrame(segs, columns=["conductor", "segment", "length_m", "geometry"]),
+                             geometry="geometry", crs=seg.crs)
+    out_c.attrs.update(cond.attrs)
+    out_s.attrs.update(seg.attrs)
+    return {**lines, "conductors": out_c, "conductor_segments": out_s}
 
 
 def _merge_twins(lines, geo, pairs, hu):
