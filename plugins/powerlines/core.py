@@ -798,8 +798,9 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
     and its lines are not already one per wire, each within ``match_m`` of it at both ends. A
     line reaching out of the ribbon stays.
 
-    Returns (lines, source) with each group redrawn (source: per returned line, the index of the
-    input line nearest it, whose attributes it takes), or None where no group changed."""
+    Returns (lines, source, points) with each group redrawn (source: per returned line, the index
+    of the input line nearest it, whose attributes it takes; points: how many of the band's points
+    a redrawn line holds, None for a line left as it was), or None where no group changed."""
     n = len(lines)
     if n == 0:
         return None
@@ -830,7 +831,7 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
     groups = {}
     for i in range(n):
         groups.setdefault(root(i), []).append(i)
-    out, source, changed = [], [], False
+    out, source, held, changed = [], [], [], False
     pts = np.column_stack([px, py])
     for members in groups.values():
         redrawn = _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg,
@@ -839,16 +840,19 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
         if redrawn is None:
             out += [lines[k] for k in members]
             source += members
+            held += [None] * len(members)
         else:
             changed = True
-            out += [ln for ln, _ in redrawn]
-            source += [k for _, k in redrawn]
-    return (out, source) if changed else None
+            out += [ln for ln, _, _ in redrawn]
+            source += [k for _, k, _ in redrawn]
+            held += [m for _, _, m in redrawn]
+    return (out, source, held) if changed else None
 
 
 def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg, step_deg, bin_m,
                   peak_m, min_points, match_m, min_wires, min_share):
-    """One group of ``ribbon_lines``: [(line, source index)] redrawn, or None (left as it is)."""
+    """One group of ``ribbon_lines``: [(line, source index, points held or None)] redrawn, or
+    None (left as it is)."""
     main = max(members, key=lambda k: lines[k][3] - lines[k][2])
     a, d, _, _ = lines[main]
     longest = lines[main][3] - lines[main][2]
@@ -920,7 +924,8 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
         slope, icpt = line_fit(s[on], o[on])
         d2 = (d + slope * nrm) / np.hypot(1.0, slope)
         a2 = a + t0 * d + (icpt + slope * t0) * nrm
-        redrawn.append(((a2, d2, 0.0, float((t1 - t0) * np.hypot(1.0, slope))), (slope, icpt, t0, t1)))
+        redrawn.append(((a2, d2, 0.0, float((t1 - t0) * np.hypot(1.0, slope))), (slope, icpt, t0, t1),
+                        int(on.sum())))
     if not redrawn:
         return None
     # each input line's offsets at its ends, in the group's frame
@@ -931,7 +936,7 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
     matched = set()
     for k in members:
         ss, oo = ends_of(k)
-        hit = [w for w, (_, (sl, ic, _, _)) in enumerate(redrawn) if np.all(np.abs(oo - (sl * ss + ic)) <= match_m)]
+        hit = [w for w, (_, (sl, ic, _, _), _) in enumerate(redrawn) if np.all(np.abs(oo - (sl * ss + ic)) <= match_m)]
         if len(hit) != 1 or hit[0] in matched:
             break
         matched.add(hit[0])
@@ -944,16 +949,16 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
         return float((b - a) @ nrm) + t * float(e @ nrm)
 
     out = []
-    for ln, (sl, ic, t0, t1) in redrawn:
+    for ln, (sl, ic, t0, t1), held in redrawn:
         mid = 0.5 * (t0 + t1)
-        out.append((ln, min(members, key=lambda k: abs(offset_at(k, mid) - (sl * mid + ic)))))
+        out.append((ln, min(members, key=lambda k: abs(offset_at(k, mid) - (sl * mid + ic))), held))
     # a line reaching out of the ribbon (another wire beside it, under min_length_m of it in
     # the band) stays
     for k in members:
         ss, oo = ends_of(k)
-        across = np.array([sl * ss + ic for _, (sl, ic, _, _) in redrawn])
+        across = np.array([sl * ss + ic for _, (sl, ic, _, _), _ in redrawn])
         if np.any(oo < across.min(axis=0) - 0.5 * min_gap_m) or np.any(oo > across.max(axis=0) + 0.5 * min_gap_m):
-            out.append((lines[k], k))
+            out.append((lines[k], k, None))
     return out
 
 

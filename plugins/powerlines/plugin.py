@@ -915,8 +915,8 @@ def _lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_sha
     # Hough's lines lie between them, leaning from one to the next; one line per wire instead
     redrawn = ribbon_lines(geo, px, py, params["band_m"] * hu, params["s_min_m"], 2 * params["v_max_m"])
     if redrawn is not None:
-        geo, source = redrawn
-        lines = _redrawn_lines(lines, geo, source, hu)
+        geo, source, held = redrawn
+        lines = _redrawn_lines(lines, geo, source, held, hu)
         timings["n_ribbon_lines_added"] = timings.get("n_ribbon_lines_added", 0) + len(geo) - len(set(source))
 
     def step_3d(geo, only=None):
@@ -990,10 +990,10 @@ def _stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) -
     return _stands_clear(xyz, np.searchsorted(around, own), radius_m, STANDS_CLEAR_MAX)
 
 
-def _redrawn_lines(lines, geo, source, hu):
+def _redrawn_lines(lines, geo, source, held, hu):
     """The Hough's layers for the lines ``geo`` (anchor, direction, from, to; metres) that
-    ``ribbon_lines`` redrew: each takes the attributes of its ``source`` line, its own geometry
-    and one segment over its extent."""
+    ``ribbon_lines`` redrew: each takes the attributes of its ``source`` line, the points it
+    ``held`` as its votes (where redrawn), its own geometry and one segment over its extent."""
     import geopandas as gpd
     import numpy as np
     import pandas as pd
@@ -1001,10 +1001,14 @@ def _redrawn_lines(lines, geo, source, hu):
 
     cond, seg = lines["conductors"], lines["conductor_segments"]
     rows, segs = [], []
-    for k, ((a, d, t0, t1), src) in enumerate(zip(geo, source)):
+    for k, ((a, d, t0, t1), src, n_held) in enumerate(zip(geo, source, held)):
         ends = [tuple((a + t * d) / hu) for t in (t0, t1)]
         row = cond.iloc[src].copy()
         row["conductor"] = k
+        if n_held is not None:
+            for col in ("votes", "n_points"):
+                if col in row.index:
+                    row[col] = n_held
         row["geometry"] = LineString(ends)
         if "length_m" in row.index:
             row["length_m"] = float(t1 - t0)
