@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench install clean
+.PHONY: demo test bench family install clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,12 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m pip install -q --no-build-isolation -e ".[bench]"
 	$(PY) benchmarks/run.py
+
+# the power-line chain over the variant family (34 variants x SEEDS; 340 scenes take ~35 min on 2 cores)
+SEEDS ?= 1-10
+family: $(STAMP)
+	$(PY) -m pip install -q --no-build-isolation -e ".[bench]"
+	$(PY) benchmarks/powerline_family.py --seeds $(SEEDS)
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache build *.egg-info
