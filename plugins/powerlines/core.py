@@ -805,14 +805,7 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
     if n == 0:
         return None
     dirs = np.array([d for _, d, _, _ in lines])
-    parent = list(range(n))
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    pairs = []
     cos_lim = np.cos(np.radians(max_angle_deg))
     long_ = [lines[k][3] - lines[k][2] >= 4 * min_length_m for k in range(n)]  # (a tower's members stay out)
     for i in range(n):
@@ -827,10 +820,12 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
             if along[1] < t0 or along[0] > t1:
                 continue
             if np.abs((ends - a) @ nrm).max() <= 2 * band_m:
-                parent[root(j)] = root(i)
+                pairs.append((i, j))
+    i, j = np.array(pairs, np.int64).reshape(-1, 2).T
+    _, group_of = connected_components(sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)), directed=False)
     groups = {}
-    for i in range(n):
-        groups.setdefault(root(i), []).append(i)
+    for k in range(n):
+        groups.setdefault(int(group_of[k]), []).append(k)
     out, source, held, changed = [], [], [], False
     pts = np.column_stack([px, py])
     for members in groups.values():
