@@ -2699,7 +2699,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
                 under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0,
                 wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0,
-                reach_down_share: float = 0.35, pole_area_m2: float = 4.0):
+                reach_down_share: float = 0.35, pole_area_m2: float = 4.0, over_wires_share: float = 1.2,
+                over_wires_reach_down_share: float = 0.15, min_axis_share: float = 0.25,
+                axis_area_m2: float = 12.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -2729,8 +2731,13 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     peak, a pole its top wire). A candidate wider than a pole (its body over ``pole_area_m2``)
     reaches down to ``reach_down_share`` of its height: a lattice's legs stand on the ground, a
     crown where wire pieces end hangs over a gap (its trunk hidden); a pole's few points may
-    leave its foot bare. The base is the median of its points (the middle of its column
-    cells leans to the side a street scan sees). ``passed_by``, a list, gets the
+    leave its foot bare; one that stands over ``over_wires_share`` times as high as the wires
+    beside it (a tower holding an earth wire not found) reaches down to
+    ``over_wires_reach_down_share`` of its height (a lattice's legs; a crown over the wires hangs
+    off the ground). A candidate up to ``axis_area_m2`` (a pole with its arms) has at least
+    ``min_axis_share`` of its points under its head on one thin vertical (``_axis_share``: a
+    pole's column; a crown spreads over metres). The base is the median of its points (the
+    middle of its column cells leans to the side a street scan sees). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell).
 
@@ -2814,8 +2821,14 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
                                                max_side_ratio, cell_m):
             continue
-        if len(body) * cell_m ** 2 > pole_area_m2 and \
-                float(hag[np.isin(flat, body)].min()) > reach_down_share * height:
+        wide = len(body) * cell_m ** 2 > pole_area_m2
+        down = float(hag[np.isin(flat, body)].min()) / height
+        if wide and down > reach_down_share:
+            continue
+        # a tower standing well over the wires found beside it holds an earth wire not found, on
+        # legs that reach the ground; a crown over the wires, off the ground, is trees
+        if wide and down > over_wires_reach_down_share and wire_near is not None and \
+                np.isfinite(wire_near[cells].max()) and height > over_wires_share * float(wire_near[cells].max()):
             continue
         # its base where its points are: the middle of its column cells leans to the side a street
         # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
@@ -2823,10 +2836,33 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         heading = float(line_headings[int(np.argmin(dist))])
         mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, np.radians(heading))))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
+        if len(body) * cell_m ** 2 <= axis_area_m2:
+            # a pole (with its arms) stands on one thin column; a crown where wire pieces end
+            # spreads its points over metres
+            share, _ = _axis_share(x, y, hag, bx, by, height)
+            if share is not None and share < min_axis_share:
+                continue
         (passed_by if passed else found).append(
             Pylon(bx, by, height, n_ends, heading, body,
                   (x0, y0, cell_m, rows, cols)))
     return found
+
+
+def _axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: float = 0.5, low_m: float = 3.0,
+                head_m: float = 1.5):
+    """The share of the points within ``radius_m`` of (``cx``, ``cy``) in plan, from ``low_m``
+    above ground to ``head_m`` under ``height`` (under a pole's arms), that lie within ``axis_m``
+    of the vertical through the densest of them (the most such points within ``axis_m``), and
+    how many there are; None for the share under 3 points. A pole's body is one thin column, a
+    crown spreads over metres."""
+    near = np.flatnonzero((np.abs(x - cx) <= radius_m) & (np.abs(y - cy) <= radius_m))
+    near = near[(np.hypot(x[near] - cx, y[near] - cy) <= radius_m) & (hag[near] >= low_m) &
+                (hag[near] <= height - head_m)]
+    if len(near) < 3:
+        return None, len(near)
+    pts = np.column_stack([x[near], y[near]])
+    within = cKDTree(pts).query_ball_point(pts, axis_m, return_length=True)
+    return float(within.max()) / len(near), len(near)
 
 
 def _base_cells(cells, column, n_layers, centres, heading_rad: float, reach_m: float = 2.5,
