@@ -2821,8 +2821,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
                                                max_side_ratio, cell_m):
             continue
-        wide = len(body) * cell_m ** 2 > pole_area_m2
-        down = float(hag[np.isin(flat, body)].min()) / height
+        area = len(body) * cell_m ** 2
+        wide = area > pole_area_m2
+        down = float(hag[np.isin(flat, body)].min()) / height if wide else 0.0  # (only wide ones are asked)
         if wide and down > reach_down_share:
             continue
         # a tower standing well over the wires found beside it holds an earth wire not found, on
@@ -2836,7 +2837,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         heading = float(line_headings[int(np.argmin(dist))])
         mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, np.radians(heading))))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
-        if len(body) * cell_m ** 2 <= axis_area_m2:
+        if area <= axis_area_m2:
             # a pole (with its arms) stands on one thin column; a crown where wire pieces end
             # spreads its points over metres
             share, _ = _axis_share(x, y, hag, bx, by, height)
