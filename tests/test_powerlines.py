@@ -2815,6 +2815,42 @@ def test_a_crown_where_spans_end_is_no_pole_its_points_spread_off_one_axis():
     assert _axis_share(*p.T, pole.x, pole.y, pole.height_m)[0] >= 0.5
 
 
+def test_two_poles_side_by_side_are_two_pylons():
+    """mobile_comm3 seed 15: line B ends at its joint-use pole 3.5 m from line A's pole, their
+    arms joining their cells into one candidate; its base, the middle, stood 2.1 m from both.
+    Each pole stands on its own thin vertical holding its own span ends: two pylons, each within
+    0.3 m of its pole (B's 8 m, A's 9 m)."""
+    _, found = _find_pylons_on("two_poles_side_by_side.npz", top_share=0.8)
+    truth = {"A": (-1.69, 0.07), "B": (1.41, 2.30)}
+    assert len(found) == 2
+    for name, (tx, ty) in truth.items():
+        near = [q for q in found if np.hypot(q.x - tx, q.y - ty) <= 0.3]
+        assert len(near) == 1, (name, [(q.x, q.y) for q in found])
+    a = min(found, key=lambda q: np.hypot(q.x - truth["A"][0], q.y - truth["A"][1]))
+    b = next(q for q in found if q is not a)
+    assert a.height_m > b.height_m and a.n_spans >= 2 and b.n_spans >= 2
+
+
+def test_a_pole_with_a_column_beside_it_is_one_pylon():
+    """The second vertical must hold span ends of its own: a pole with a trunk or a lamp post 2 m
+    beside it, where no wire ends, stays one pole; with two of the ends there, two poles."""
+    from toolbox_plugins.powerlines.core import _pole_pair
+
+    rng = np.random.default_rng(5)
+    z = rng.uniform(0.5, 9.0, 150)
+    pole = np.column_stack([rng.normal(0, 0.05, 150), rng.normal(0, 0.05, 150), z])
+    trunk = np.column_stack([2.0 + rng.normal(0, 0.1, 100), rng.normal(0, 0.1, 100), rng.uniform(0.5, 8.0, 100)])
+    pts = np.vstack([pole, trunk])
+    flat = np.where(pts[:, 0] > 1.0, 1, 0)
+    centres = np.array([[0.5, 0.5], [2.5, 0.5]])
+    ends = np.array([[0.0, 1.2], [0.0, -1.2], [0.1, 1.2], [0.1, -1.2]])
+    assert _pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends, np.full(4, 8.5), centres, 2, 0.25, 1.5) is None
+    # the same with two of the ends at the second column: two poles
+    ends2 = np.array([[0.0, 1.2], [0.0, -1.2], [2.0, 1.0], [2.0, -1.0]])
+    pair = _pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends2, np.full(4, 8.5), centres, 2, 0.25, 1.5)
+    assert pair is not None and sorted(round(p[0][0]) for p in pair) == [0, 2]
+
+
 def test_axis_share_of_a_pole_and_of_a_cone():
     """A pole's points under its head lie on one thin vertical; a conifer's crown spreads."""
     from toolbox_plugins.powerlines.core import _axis_share

@@ -2701,7 +2701,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0,
                 reach_down_share: float = 0.35, pole_area_m2: float = 4.0, over_wires_share: float = 1.2,
                 over_wires_reach_down_share: float = 0.15, min_axis_share: float = 0.25,
-                axis_area_m2: float = 12.0):
+                axis_area_m2: float = 12.0, pair_apart_m: float = 1.5):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -2739,7 +2739,9 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     pole's column; a crown spreads over metres). The base is the median of its points (the
     middle of its column cells leans to the side a street scan sees). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
-    through: its arms, if found as lines, tell).
+    through: its arms, if found as lines, tell). A candidate up to twice ``axis_area_m2`` standing
+    on two thin verticals at least ``pair_apart_m`` apart, each holding span ends of its own, is
+    two poles (``_pole_pair``: a line ending at its pole beside another line's pole).
 
     A tower stands under the lines it carries: its base within ``under_line_m`` of a conductor in
     plan (an earth wire over its body, a pole's top insulator), or between conductors, the farther
@@ -2843,10 +2845,67 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             share, _ = _axis_share(x, y, hag, bx, by, height)
             if share is not None and share < min_axis_share:
                 continue
+        pair = None if passed or area > 2 * axis_area_m2 else \
+            _pole_pair(x, y, hag, flat, body, height, np.asarray(span_ends, float)[owner == k],
+                       span_end_hag[owner == k], centres, min_ends, min_axis_share, pair_apart_m)
+        if pair is not None:
+            # two poles side by side (a line ending at its own pole beside another line's): their
+            # arms join their cells into one candidate, whose middle is neither pole
+            for (ax, ay), ax_height, ax_ends, ax_body in pair:
+                dist = [_point_segment_distance(ax, ay, a, b) for a, b in lines_xy]
+                found.append(Pylon(ax, ay, ax_height, ax_ends, float(line_headings[int(np.argmin(dist))]), ax_body,
+                                   (x0, y0, cell_m, rows, cols)))
+            continue
         (passed_by if passed else found).append(
             Pylon(bx, by, height, n_ends, heading, body,
                   (x0, y0, cell_m, rows, cols)))
     return found
+
+
+def _pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
+               min_share: float, apart_m: float, axis_m: float = 0.5, low_m: float = 3.0, head_m: float = 1.5,
+               second_share: float = 0.5, min_points: int = 5, min_rise_share: float = 0.5):
+    """Two poles in one candidate, or None: the body's points from ``low_m`` above ground to
+    ``head_m`` under its top gathered on thin verticals (the most within ``axis_m``), the densest
+    holding ``min_share`` of them (a pole's column, not a lattice's legs) and another at least
+    ``apart_m`` from it ``second_share`` as many, rising over ``min_rise_share`` of that height
+    (a column, not a crown's piece); each holds at least ``min_ends`` of the candidate's span ends
+    (``ends_xy``, their heights ``ends_hag``), the nearer axis's. Returns per pole ((x, y),
+    height, its span ends, its body cells: the nearer pole's)."""
+    mine = np.flatnonzero(np.isin(flat, body) & (hag >= low_m) & (hag <= height - head_m))
+    if len(mine) < 2 * min_points or len(ends_xy) < 2 * min_ends:
+        return None
+    pts = np.column_stack([x[mine], y[mine]])
+    tree = cKDTree(pts)
+    count = tree.query_ball_point(pts, axis_m, return_length=True)
+    first = int(np.argmax(count))
+    if count[first] < min_share * len(mine):
+        return None
+    far = np.flatnonzero(np.hypot(*(pts - pts[first]).T) >= apart_m)
+    if not len(far):
+        return None
+    second = int(far[np.argmax(count[far])])
+    if count[second] < max(min_points, second_share * count[first]):
+        return None
+    axes, rise = [], (height - head_m - low_m) * min_rise_share
+    for i in (first, second):
+        on = tree.query_ball_point(pts[i], axis_m)
+        if np.ptp(hag[mine[on]]) < rise:
+            return None
+        axes.append(pts[on].mean(axis=0))
+    axes = np.array(axes)
+    which = np.argmin(np.hypot(*(ends_xy[:, None, :] - axes[None, :, :]).transpose(2, 0, 1)), axis=1)
+    if min(np.bincount(which, minlength=2)) < min_ends:
+        return None
+    cell_of = np.argmin(np.hypot(*(centres[body][:, None, :] - axes[None, :, :]).transpose(2, 0, 1)), axis=1)
+    inside = np.flatnonzero(np.isin(flat, body))
+    out = []
+    for j in (0, 1):
+        # as high as its own top (its arms) or the wires ending on it
+        top = hag[inside[np.hypot(x[inside] - axes[j][0], y[inside] - axes[j][1]) <= 2 * axis_m]].max()
+        out.append(((float(axes[j][0]), float(axes[j][1])), max(float(top), float(ends_hag[which == j].max())),
+                    int(np.sum(which == j)), np.asarray(body)[cell_of == j]))
+    return out
 
 
 def _axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: float = 0.5, low_m: float = 3.0,
