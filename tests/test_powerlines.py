@@ -2851,6 +2851,18 @@ def test_a_pole_with_a_column_beside_it_is_one_pylon():
     assert pair is not None and sorted(round(p[0][0]) for p in pair) == [0, 2]
 
 
+def test_a_lattice_merged_with_a_crown_has_its_base_under_its_peak():
+    """span60 seed 15: a 31 m lattice with a 21 m conifer touching it, one candidate of 149 m2 of
+    cells (the largest true tower body: 73 in the family, AHN4 76); the median of its points
+    stood 9 m off, in the crown. Its base is taken under its peak: within 0.5 m of the tower."""
+    tx, ty = 1.45, -2.13
+    _, found = _find_pylons_on("lattice_with_a_crown_touching_it.npz", top_share=0.8)
+    assert len(found) == 1 and len(found[0].cells) > 100
+    assert np.hypot(found[0].x - tx, found[0].y - ty) <= 0.5
+    _, found = _find_pylons_on("lattice_with_a_crown_touching_it.npz", top_share=0.8, one_tower_m2=1e9)
+    assert np.hypot(found[0].x - tx, found[0].y - ty) > 5.0  # the rule is what places it
+
+
 def test_axis_share_of_a_pole_and_of_a_cone():
     """A pole's points under its head lie on one thin vertical; a conifer's crown spreads."""
     from toolbox_plugins.powerlines.core import _axis_share

@@ -2701,7 +2701,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
                 wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0,
                 reach_down_share: float = 0.35, pole_area_m2: float = 4.0, over_wires_share: float = 1.2,
                 over_wires_reach_down_share: float = 0.15, min_axis_share: float = 0.25,
-                axis_area_m2: float = 12.0, pair_apart_m: float = 1.5):
+                axis_area_m2: float = 12.0, pair_apart_m: float = 1.5, one_tower_m2: float = 100.0,
+                peak_reach_m: float = 5.0):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -2741,7 +2742,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell). A candidate up to twice ``axis_area_m2`` standing
     on two thin verticals at least ``pair_apart_m`` apart, each holding span ends of its own, is
-    two poles (``_pole_pair``: a line ending at its pole beside another line's pole).
+    two poles (``_pole_pair``: a line ending at its pole beside another line's pole). A body over
+    ``one_tower_m2`` (the family's largest true tower 73 m2 of cells, AHN4's 76) is a lattice
+    with crowns touching it: its base comes from its cells within ``peak_reach_m`` of its
+    highest column cell.
 
     A tower stands under the lines it carries: its base within ``under_line_m`` of a conductor in
     plan (an earth wire over its body, a pole's top insulator), or between conductors, the farther
@@ -2837,7 +2841,14 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
         # runs off its top along the line
         heading = float(line_headings[int(np.argmin(dist))])
-        mine = np.flatnonzero(np.isin(flat, _base_cells(cells, column, n_layers, centres, np.radians(heading))))
+        base_cells = _base_cells(cells, column, n_layers, centres, np.radians(heading))
+        if area > one_tower_m2:
+            # wider than any one tower: a lattice with the crowns touching it; its base under its
+            # peak (the earth wire's), not amid the crowns' many points
+            col = cells[column[cells]]
+            peak = centres[col[np.argmax(top[col])]]
+            base_cells = base_cells[np.hypot(*(centres[base_cells] - peak).T) <= peak_reach_m]
+        mine = np.flatnonzero(np.isin(flat, base_cells))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
         if area <= axis_area_m2:
             # a pole (with its arms) stands on one thin column; a crown where wire pieces end
