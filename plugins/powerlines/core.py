@@ -2745,7 +2745,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     two poles (``_pole_pair``: a line ending at its pole beside another line's pole). A body over
     ``one_tower_m2`` (the family's largest true tower 73 m2 of cells, AHN4's 76) is a lattice
     with crowns touching it: its base comes from its cells within ``peak_reach_m`` of its
-    highest column cell.
+    highest column cell, and its body keeps the cells within the half-diagonal of a square of
+    ``one_tower_m2`` of that base.
 
     A tower stands under the lines it carries: its base within ``under_line_m`` of a conductor in
     plan (an earth wire over its body, a pole's top insulator), or between conductors, the farther
@@ -2850,6 +2851,10 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
             base_cells = base_cells[np.hypot(*(centres[base_cells] - peak).T) <= peak_reach_m]
         mine = np.flatnonzero(np.isin(flat, base_cells))
         bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
+        if area > one_tower_m2:
+            # its points (class 15): the cells one tower's body could cover about that base (the
+            # half-diagonal of a square of one_tower_m2), not the crowns'
+            body = body[np.hypot(centres[body][:, 0] - bx, centres[body][:, 1] - by) <= np.sqrt(one_tower_m2 / 2)]
         if area <= axis_area_m2:
             # a pole (with its arms) stands on one thin column; a crown where wire pieces end
             # spreads its points over metres
