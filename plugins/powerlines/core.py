@@ -2888,7 +2888,8 @@ def _pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres,
     (a column, not a crown's piece); each holds at least ``min_ends`` of the candidate's span ends
     (``ends_xy``, their heights ``ends_hag``), the nearer axis's. Returns per pole ((x, y),
     height, its span ends, its body cells: the nearer pole's)."""
-    mine = np.flatnonzero(np.isin(flat, body) & (hag >= low_m) & (hag <= height - head_m))
+    inside = np.flatnonzero(np.isin(flat, body))
+    mine = inside[(hag[inside] >= low_m) & (hag[inside] <= height - head_m)]
     if len(mine) < 2 * min_points or len(ends_xy) < 2 * min_ends:
         return None
     pts = np.column_stack([x[mine], y[mine]])
@@ -2914,7 +2915,6 @@ def _pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres,
     if min(np.bincount(which, minlength=2)) < min_ends:
         return None
     cell_of = np.argmin(np.hypot(*(centres[body][:, None, :] - axes[None, :, :]).transpose(2, 0, 1)), axis=1)
-    inside = np.flatnonzero(np.isin(flat, body))
     out = []
     for j in (0, 1):
         # as high as its own top (its arms) or the wires ending on it
