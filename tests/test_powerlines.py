@@ -907,6 +907,42 @@ def _short_wire_scene(rng):
     return PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2]), label
 
 
+def _in_ball(rng, centre, radius_m, n):
+    p = rng.normal(size=(n, 3))
+    return np.asarray(centre) + p / np.linalg.norm(p, axis=1, keepdims=True) * radius_m * rng.random((n, 1)) ** (1 / 3)
+
+
+def test_alone_beside_wires_takes_a_wire_beside_one_and_its_missed_points_not_a_crown():
+    """The points alone in the air near a wire found are wire: a second wire 0.35 m under it (too
+    close for the 2D step), its points off the fit's tolerance, a run of them past its end (one
+    round further each); a crown the wire runs along, a lone point 0.8 m off it, and points not
+    free (a pole's) are not."""
+    from toolbox_plugins.powerlines.core import alone_beside_wires
+
+    rng = np.random.default_rng(3)
+    x = np.arange(0.0, 20.0, 0.2)
+    parts = {
+        "wire": np.column_stack([x, np.zeros_like(x), np.full_like(x, 8.0)]),
+        "beside": np.column_stack([np.arange(0.1, 20.0, 0.5), np.zeros(40), np.full(40, 7.65)]),
+        "off_fit": np.column_stack([np.arange(1.3, 19.0, 2.0), np.full(9, 0.25), np.full(9, 8.05)]),
+        "past_end": np.column_stack([20.2 + 0.4 * np.arange(3), np.zeros(3), np.full(3, 8.0)]),
+        "beyond": np.array([[21.8 + 0.4 * k, 0.0, 8.0] for k in range(2)]),  # a fourth round away
+        "crown": _in_ball(rng, (10.0, 1.3, 8.0), 1.0, 800),  # its edge 0.3 m from the wire
+        "lone": np.array([[5.0, 0.8, 8.0]]),
+        "pole": np.column_stack([np.full(20, 15.0), np.full(20, 0.3), np.linspace(0, 8.2, 20)]),
+    }
+    xyz = np.vstack(list(parts.values()))
+    label = np.concatenate([[k] * len(v) for k, v in parts.items()])
+    taken, via = alone_beside_wires(xyz, label == "wire", label != "pole", reach_m=0.5)
+    is_taken = np.isin(np.arange(len(xyz)), taken)
+    # where the crown is within 1 m, the wire's points have too many others around them
+    clear = np.hypot(xyz[:, 0] - 10.0, xyz[:, 1] - 1.3) > 2.0
+    for part in ("beside", "off_fit", "past_end"):
+        assert is_taken[(label == part) & clear].all(), part
+    assert np.isin(label[taken], ["beside", "off_fit", "past_end"]).all(), np.unique(label[taken], return_counts=True)
+    assert (label[via] == "wire").all()
+
+
 def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_facades():
     """Of the straight runs left on no wire, only the wire that leaves the pole where the found
     wires are held and leads away from them is a short wire; a tower's arm (the end nearer the
@@ -3122,7 +3158,7 @@ def _ahn4_real(name, tmp_path):
     return tmp_path / f"{name}.laz", sub
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.99), ("12AN2_20", 0.98, 0.975)])
+@pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.99), ("12AN2_20", 0.98, 0.985)])
 def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (measured
     0.994 / 0.995 and 0.986 / 0.981; 12AN2_20: 0.986 / 0.968 while its sparse earth wires, seen
@@ -3154,24 +3190,14 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
     assert (tower & t15).sum() / t15.sum() >= 0.8 and (tower & t15).sum() / tower.sum() >= 0.7
 
 
-@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.92, 0.85), ("part3_ak", 0.97, 0.9),
+@pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.92, 0.90), ("part3_ak", 0.97, 0.9),
                                                               ("part2_ai", 0.90, 0.90)])
 def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
-    """Oakland mobile scans (a car-mounted scanner under distribution lines), no setting: wire
-    points against the CMU wire labels (class 14). Floors just under what is reached, not the
-    issue's 0.90 (see the issue notes): part3_an, wires 0.3-1 m above one another: P 0.928 /
-    R 0.861 (0.943 / 0.845 before a stack's wires grew up to their poles: +40 points labelled
-    wire, +41 not, which lie on the wires' paths in the last 1-2 m before the poles, where the
-    labels stop; 0.945 / 0.776 before stacks of short wires: a stack's wires counted as clutter
-    around each other; tangles and risers at pole tops are missed);
-    part3_ak, wires seen for 5-8 m between crowns: 1.000 / 0.931 (P 0.818 while a truck's top
-    edge was taken for a wire); part2_ai, the issue's 0.90 met: 0.902 / 0.916 (0.905 / 0.894
-    before a wire askew to its line was bridged through a crown; 0.900 / 0.849 before the wires leading
-    from the poles found: a wire seen in two pieces 1 and 3 m long, 2.5 m out from its pole;
-    0.806 / 0.804 before the next span past
-    the last pole and crowded spans: its sparse upper wire past that pole was missed, and a
-    catenary through crown tops under the lower wire taken; 0.837 / 0.845 before the foliage
-    test: crown points on the lower wire's spans where it runs through trees)."""
+    """Oakland mobile scans (a car-mounted scanner under distribution wires), no setting: wire
+    points against the CMU wire labels (class 14), the issue's 0.90 on each. part3_an: wires
+    0.3-1 m above one another, a service drop, wires leaving the tile a few metres past a pole;
+    part3_ak: wires seen for 5-8 m between crowns (and a truck's top edge under them); part2_ai:
+    a sparse upper wire past the last pole, the lower one through crowns."""
     path = shared_file(f"oakland_mls/oakland_{name}.laz")
     toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
     truth = np.asarray(laspy.read(path).classification) == 14

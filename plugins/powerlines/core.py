@@ -773,6 +773,42 @@ def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
     return float(np.mean(around)) <= max_around
 
 
+def alone_beside_wires(xyz, wire, free, reach_m: float = 0.5, near_m: float = 0.4, max_near: int = 2,
+                       around_m: float = 1.0, max_around: int = 8, rounds: int = 3):
+    """The points ``free`` (mask over ``xyz``, metres) within ``reach_m`` of a point of ``wire``
+    (mask) that stand alone in the air: at most ``max_near`` other points that are not wire within
+    ``near_m`` and ``max_around`` within ``around_m``. They are the wire points its fits left out
+    (a sparse scan's points off the catenary's tolerance) and a wire hanging beside it closer than
+    the 2D step tells apart; a crown's or a pole's points have many others around them. Taken
+    points are wire for the next of ``rounds`` (a run of them off a wire's end). Returns (taken
+    indices, for each the ``wire`` point it was taken through)."""
+    wire = np.asarray(wire, bool).copy()
+    root = np.where(wire, np.arange(len(xyz)), -1)
+    if not wire.any() or not np.any(free & ~wire):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    tree = cKDTree(xyz)
+    for _ in range(rounds):
+        on = np.flatnonzero(wire)
+        wires = cKDTree(xyz[on])
+        cand = np.flatnonzero(free & ~wire)
+        d, j = wires.query(xyz[cand], distance_upper_bound=reach_m)
+        near = np.isfinite(d)
+        cand, j = cand[near], j[near]
+        if not len(cand):
+            break
+        # others that are not wire (the point itself is one of the tree's)
+        alone = (tree.query_ball_point(xyz[cand], near_m, return_length=True)
+                 - wires.query_ball_point(xyz[cand], near_m, return_length=True) - 1 <= max_near)
+        alone &= (tree.query_ball_point(xyz[cand], around_m, return_length=True)
+                  - wires.query_ball_point(xyz[cand], around_m, return_length=True) - 1 <= max_around)
+        if not alone.any():
+            break
+        wire[cand[alone]] = True
+        root[cand[alone]] = root[on[j[alone]]]
+    taken = np.flatnonzero(wire & (root != np.arange(len(xyz))))
+    return taken, root[taken]
+
+
 def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: float,
                  min_gap_m: float = SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5, search_deg: float = 0.2,
                  step_deg: float = 0.005, bin_m: float = 0.02, peak_m: float = 0.06, min_points: int = 20,

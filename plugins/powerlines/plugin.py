@@ -19,6 +19,12 @@ POLE_TAKES_M = 6.0
 # how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
 # grid); a lattice tower's reaches 4-8 m
 POLE_FOOTPRINT_M = 3.0
+# how far from a wire's points a point alone in the air is still taken for its: the closest two
+# wires of a line hang on their supports (a ribbon's or a joint-use pole's cables, 0.3-0.5 m)
+ALONE_REACH_M = 0.5
+# at most this many others within 1 m of a point alone in the air: a dense scan's crown points
+# near a wire hold more (Oakland: most 20 or more)
+ALONE_MAX_AROUND = 8
 # tan 1 deg: a span runs along its line within 1 deg of it (as _along's lines)
 ALONG_SLOPE_MAX = 0.01746
 
@@ -348,6 +354,26 @@ def _run(inputs, params, ctx):
     lines, geo, spans, conductor_of, wire_of_input, n_side = _side_by_side(lines, geo, spans, conductor_of,
                                                                            wire_of_input, pc.x * hu, pc.y * hu,
                                                                            params, hu)
+    n_alone, max_around = 0, None
+    fitted_of = conductor_of  # the lone points taken next do not reach a line any further
+    if params["alone_beside_wires"] and (conductor_of >= 0).any():
+        # points alone in the air right beside a wire are its (or a wire's hanging beside it): the
+        # fits' tolerance left them out; not those the foliage and trend tests just took off
+        t = time.perf_counter()
+        from .core import alone_beside_wires
+
+        free = (conductor_of[around] < 0) & ~tower_pt[around]
+        free[np.isin(around, np.r_[foliage, off_trend])] = False
+        # alone: fewer others than a quarter of what a surface of the survey's density through
+        # the 1 m ball holds (a sparse survey's crown edges are as empty as a dense one's wires)
+        max_around = min(ALONE_MAX_AROUND, int(np.median(surface_density) * np.pi / 4)) if len(idx) else 0
+        taken, via = alone_beside_wires(around_xyz, conductor_of[around] >= 0, free, reach_m=ALONE_REACH_M,
+                                        around_m=1.0, max_around=max_around)
+        conductor_of = conductor_of.copy()
+        conductor_of[around[taken]] = conductor_of[around[via]]
+        wire_of_input[around[taken]] = wire_of_input[around[via]]
+        n_alone = len(taken)
+        timings["alone_beside_wires_s"] = time.perf_counter() - t
     # the plan layers (and so the crossings) of a line one span holds settle on that span's trend
     # where it drifts off the line by more than the crossings' tolerance: a wire seen over one
     # stretch from one side, leant by the points of a line crossing it in its band (the 3D step
@@ -391,7 +417,7 @@ def _run(inputs, params, ctx):
         {"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
     c3d.attrs["geometry_type"] = "LineString Z"
     bounds = (float(pc.x.min()) * hu, float(pc.y.min()) * hu, float(pc.x.max()) * hu, float(pc.y.max()) * hu)
-    wire_reach = _wire_reach(cond, conductor_of, pc, hu) if params["crossing_validation"] == "extent" else None
+    wire_reach = _wire_reach(cond, fitted_of, pc, hu) if params["crossing_validation"] == "extent" else None
     crossings = _crossings_of(cond, lines["conductor_segments"], params["crossing_validation"], hu, found,
                               bounds=bounds, wire_reach=wire_reach)
     layers = {"conductors": cond, "conductor_segments": lines["conductor_segments"],
@@ -415,7 +441,7 @@ def _run(inputs, params, ctx):
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_twin_lines_merged": timings.pop("n_twin_lines_merged", 0), "n_not_wires": len(not_wires), "n_surface_lines": len(surfaces), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
-             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
+             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_alone_points": n_alone, "alone_max_around_used": max_around, "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
@@ -1772,6 +1798,9 @@ def toolbox_algorithms():
                       "edge or a pole's blob): a wire seen sparsely past the last support the Hough found"),
             Parameter("bridge_gaps", bool, True, "between two pieces of a wire up to 2 x s_min_m apart that one "
                       "catenary fits as closely as their own points, take the points on it: a wire through a crown"),
+            Parameter("alone_beside_wires", bool, True, "take the points alone in the air (at most 2 others within "
+                      "0.4 m, 8 within 1 m) up to 0.5 m from a wire's points as wire: the points its fits left out "
+                      "and a wire hanging beside it closer than the 2D step tells apart"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
