@@ -1799,8 +1799,9 @@ def toolbox_algorithms():
             Parameter("bridge_gaps", bool, True, "between two pieces of a wire up to 2 x s_min_m apart that one "
                       "catenary fits as closely as their own points, take the points on it: a wire through a crown"),
             Parameter("alone_beside_wires", bool, True, "take the points alone in the air (at most 2 others within "
-                      "0.4 m, 8 within 1 m) up to 0.5 m from a wire's points as wire: the points its fits left out "
-                      "and a wire hanging beside it closer than the 2D step tells apart"),
+                      "0.4 m; within 1 m at most 8 and a quarter of what a surface of the survey's density holds) "
+                      "up to 0.5 m from a wire's points as wire: the points its fits left out and a wire hanging "
+                      "beside it closer than the 2D step tells apart"),
             Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
             Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
                       "spans ending at it are attached", minimum=0.1, maximum=2.0),
