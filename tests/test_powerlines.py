@@ -3161,11 +3161,9 @@ def _ahn4_real(name, tmp_path):
 @pytest.mark.parametrize("name, min_precision, min_recall", [("07CZ2_14", 0.99, 0.99), ("12AN2_20", 0.98, 0.985)])
 def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, tmp_path):
     """Both real AHN4 tiles, no setting: wire points against the producer's class 14 (measured
-    0.994 / 0.995 and 0.986 / 0.981; 12AN2_20: 0.986 / 0.968 while its sparse earth wires, seen
-    in stretches up to 26 m apart, were found in pieces; the producer counts the wire across a
-    tower's footprint as tower, and so do we: P 0.978 while spans grew across it), V_max chosen
-    from the wires' point spacing (about
-    0.33 m on both: 3.2-3.3 m), and the tile's one tower
+    0.994 / 0.998 and 0.987 / 0.991; 12AN2_20's sparse earth wires are seen in stretches up to
+    26 m apart; the producer counts the wire across a tower's footprint as tower, and so do we),
+    V_max chosen from the wires' point spacing (about 0.33 m on both: 3.2-3.3 m), and the tile's one tower
     (the producer's class 15) found within 2 m, nothing else taken for one."""
     path, sub = _ahn4_real(name, tmp_path)
     rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", crs="EPSG:28992",

@@ -774,19 +774,20 @@ def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
 
 
 def alone_beside_wires(xyz, wire, free, reach_m: float = 0.5, near_m: float = 0.4, max_near: int = 2,
-                       around_m: float = 1.0, max_around: int = 8, rounds: int = 3):
+                       around_m: float = 1.0, max_around: int = 8, rounds: int = 3, tree=None):
     """The points ``free`` (mask over ``xyz``, metres) within ``reach_m`` of a point of ``wire``
     (mask) that stand alone in the air: at most ``max_near`` other points that are not wire within
     ``near_m`` and ``max_around`` within ``around_m``. They are the wire points its fits left out
     (a sparse scan's points off the catenary's tolerance) and a wire hanging beside it closer than
     the 2D step tells apart; a crown's or a pole's points have many others around them. Taken
-    points are wire for the next of ``rounds`` (a run of them off a wire's end). Returns (taken
-    indices, for each the ``wire`` point it was taken through)."""
+    points are wire for the next of ``rounds`` (a run of them off a wire's end). ``tree``: a
+    cKDTree of ``xyz`` where the caller has one. Returns (taken indices, for each the ``wire``
+    point it was taken through)."""
     wire = np.asarray(wire, bool).copy()
     root = np.where(wire, np.arange(len(xyz)), -1)
     if not wire.any() or not np.any(free & ~wire):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    tree = cKDTree(xyz)
+    tree = cKDTree(xyz) if tree is None else tree
     for _ in range(rounds):
         on = np.flatnonzero(wire)
         wires = cKDTree(xyz[on])

@@ -22,8 +22,9 @@ POLE_FOOTPRINT_M = 3.0
 # how far from a wire's points a point alone in the air is still taken for its: the closest two
 # wires of a line hang on their supports (a ribbon's or a joint-use pole's cables, 0.3-0.5 m)
 ALONE_REACH_M = 0.5
-# at most this many others within 1 m of a point alone in the air: a dense scan's crown points
-# near a wire hold more (Oakland: most 20 or more)
+# at most this many others within ALONE_AROUND_M of a point alone in the air: a dense scan's
+# crown points near a wire hold more (Oakland: most 20 or more)
+ALONE_AROUND_M = 1.0
 ALONE_MAX_AROUND = 8
 # tan 1 deg: a span runs along its line within 1 deg of it (as _along's lines)
 ALONG_SLOPE_MAX = 0.01746
@@ -365,10 +366,10 @@ def _run(inputs, params, ctx):
         free = (conductor_of[around] < 0) & ~tower_pt[around]
         free[np.isin(around, np.r_[foliage, off_trend])] = False
         # alone: fewer others than a quarter of what a surface of the survey's density through
-        # the 1 m ball holds (a sparse survey's crown edges are as empty as a dense one's wires)
-        max_around = min(ALONE_MAX_AROUND, int(np.median(surface_density) * np.pi / 4)) if len(idx) else 0
+        # the ball holds (a sparse survey's crown edges are as empty as a dense one's wires)
+        max_around = min(ALONE_MAX_AROUND, int(np.median(surface_density) * np.pi * ALONE_AROUND_M ** 2 / 4))
         taken, via = alone_beside_wires(around_xyz, conductor_of[around] >= 0, free, reach_m=ALONE_REACH_M,
-                                        around_m=1.0, max_around=max_around)
+                                        around_m=ALONE_AROUND_M, max_around=max_around, tree=around_tree)
         conductor_of = conductor_of.copy()
         conductor_of[around[taken]] = conductor_of[around[via]]
         wire_of_input[around[taken]] = wire_of_input[around[via]]
