@@ -516,6 +516,49 @@ def test_bundle_split_follows_the_wires_trend_not_the_pieces():
         assert np.mean(mine == main) >= 0.97 and np.mean(label[lab == main] == k) >= 0.97
 
 
+@pytest.mark.parametrize("spacing, n_conductors", [(0.2, 1), (0.4, 3)])
+def test_side_by_side_is_not_chained_by_a_piece_drifting_across_the_gap(spacing, n_conductors):
+    """Three wires ``spacing`` apart along one Hough line, three spans each, and a 21 m piece at a
+    tower whose offset drifts 0.27 m along it (0.7 deg: within the 1 deg left to jumpers), its
+    middle half-way between two wires. A triangle bundle's sub-conductors 0.2 m apart in plan stay
+    one conductor; a ribbon's phases 0.4 m apart become one each. How it failed (held-out seed 19,
+    bundle3_d5): the piece's middle chained two sub-conductors' groups, and the bundle came out
+    as two conductors beside its phase (9 of 10, crossings 15 of 21); the ribbon here gave two
+    too, one holding two phases."""
+    import geopandas as gpd
+    from shapely.geometry import LineString
+
+    from toolbox_plugins.powerlines.core import Span
+    from toolbox_plugins.powerlines.plugin import _side_by_side
+
+    offsets = [-spacing, 0.0, spacing]
+    spans, xs, ys, wire = [], [], [], []
+    for w, o in enumerate(offsets):
+        for k, (s0, s1) in enumerate([(0.0, 185.0), (185.5, 370.0), (370.5, 554.0)]):
+            spans.append(Span(0, w, k, 0.5 * (s0 + s1), 1500.0, 20.0, s0, s1, 0.03, 300, 2.5, offset=o,
+                              offset_rms=0.04, lateral_tol=0.12))
+        s = np.arange(0.0, 554.0, 0.5)
+        xs.append(s), ys.append(np.full(len(s), o)), wire.append(np.full(len(s), w))
+    spans.append(Span(0, 3, 0, 11.0, 1500.0, 20.0, 0.3, 21.8, 0.04, 25, 0.1, offset=spacing / 2 - 0.0125 * 11.0,
+                      offset_slope=0.0125, offset_rms=0.04, lateral_tol=0.12))
+    x, y, wire_of = np.concatenate(xs), np.concatenate(ys), np.concatenate(wire)
+    line = LineString([(0.0, 0.0), (554.0, 0.0)])
+    cond = gpd.GeoDataFrame({"conductor": [0], "azimuth_deg": [90.0], "n_points": [len(x)]}, geometry=[line])
+    seg = gpd.GeoDataFrame({"conductor": [0]}, geometry=[line])
+    geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 554.0)]
+    params = {"max_rms_3d_m": 0.15, "s_min_m": 8.0}
+    lines, geo, spans, conductor_of, wire_of, added = _side_by_side(
+        {"conductors": cond, "conductor_segments": seg}, geo, spans, np.zeros(len(x), np.int64), wire_of, x, y,
+        params, 1.0)
+    assert added == n_conductors - 1 and len(lines["conductors"]) == n_conductors
+    # each conductor holds one wire's points, or the whole bundle's
+    for k in range(n_conductors):
+        assert np.ptp(y[conductor_of == k]) == (2 * spacing if n_conductors == 1 else 0.0)
+    got = sorted(float(np.median(y[conductor_of == k])) for k in range(n_conductors))
+    want = [0.0] if n_conductors == 1 else offsets
+    assert np.allclose(got, want, atol=0.01)
+
+
 def _ribbon_points(rng, offsets, length_m=500.0, per_m=2.0, sd_m=0.04, heading_deg=20.0):
     """Plan points of wires side by side (``offsets`` across a line at ``heading_deg``), and the
     line's frame (anchor, direction, normal)."""

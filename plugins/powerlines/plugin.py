@@ -1252,15 +1252,17 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
     moved = {}  # original conductor -> [(new index, offset trend (slope, intercept))]
     plan = _plan_trends(spans, params)
     for li in range(len(geo)):
-        # spans along the line (within 1 deg, as _along): a jumper at a tower, crossing the gap
-        # between two wires over its few metres, would join their groups
-        mine = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
+        # spans along the line (within 1 deg, as _along) whose offset drifts less than half the gap
+        # over their length: a jumper at a tower, or a longer piece there crossing between two
+        # wires, has its middle between their groups and would chain them into one
+        trend, agree = plan.get(li, (0.0, False))[:2]
+        mine = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX and
+                abs(sp.offset_slope - (trend if agree else 0.0)) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
         if len(mine) < 2:
             continue
         # span middles' offsets about the wires' own plan trend: the Hough's line can lie across
         # two phases at a small angle, so that one phase's offset drifts along it by a good part
         # of the gap to the next
-        trend, agree = plan.get(li, (0.0, False))[:2]
         smid = np.array([0.5 * (sp.s_from + sp.s_to) for sp in mine])
         mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - (trend if agree else 0.0) * smid
         order = np.argsort(mid)
