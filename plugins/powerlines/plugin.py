@@ -430,13 +430,15 @@ def _run(inputs, params, ctx):
         cls[tower_pt] = 15
         cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
-    if len(cond) == 0 and linear.sum() >= 200 and n_th < 0.15 * linear.sum():
+    if (len(cond) == 0 or params["cell_size_m"] is not None) and linear.sum() >= 200 and n_th < 0.15 * linear.sum():
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
-        # opening keeps, and the top-hat throws the wires away
+        # opening keeps, and the top-hat throws the wires away (the second pass may still find the
+        # sparsest few)
         ctx.log.warning(
-            "powerlines: the top-hat kept %d of %d wire-like points and no conductor was found; conductors "
+            "powerlines: the top-hat kept %d of %d wire-like points and %d conductors were found; conductors "
             "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
-            "leave cell_size_m automatic or set it to a third of their spacing", n_th, int(linear.sum()), cell_used)
+            "leave cell_size_m automatic or set it to a third of their spacing", n_th, int(linear.sum()), len(cond),
+            cell_used)
     stats = {"n_points": len(pc), "n_candidates": int(len(idx)), "n_linear": int(linear.sum()), "n_tophat": n_th,
              "height_max_m_used": round(h_max, 2),
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
@@ -1111,7 +1113,9 @@ def _plan_trends(spans, params) -> dict:
     """Per line, the plan trend of its wires: their spans' offset slope along it, pooled over the
     spans that fit and are S_min long, each weighted by its precision. line -> (trend, whether the
     spans agree on it (no bend at a support, no fan of wires), and per span: weight, middle along
-    the line, offset there, points)."""
+    the line, offset there, points; then the trend of the spans' offsets from one span to the next
+    along each wire (a common slope, each wire its own intercept, weighted by the points over their
+    scatter), None where no wire has two such spans)."""
     import numpy as np
 
     from .core import WIRE_LATERAL_RMS_M
@@ -1124,13 +1128,21 @@ def _plan_trends(spans, params) -> dict:
             w = sp.n_points * length ** 2 / 12.0 / max(sp.offset_rms, 0.01) ** 2
             mid = 0.5 * (sp.s_from + sp.s_to)
             pooled.setdefault(sp.conductor, []).append((w, sp.offset_slope, mid, sp.offset + sp.offset_slope * mid,
-                                                        sp.n_points))
+                                                        sp.n_points, sp.wire, sp.n_points / max(sp.offset_rms, 0.01) ** 2))
     out = {}
     for li, rows in pooled.items():
-        w, slope, mid, off, n = map(np.array, zip(*rows))
+        w, slope, mid, off, n, wire, v = map(np.array, zip(*rows))
         trend = float(w @ slope / w.sum())
         agree = bool(w @ (slope - trend) ** 2 <= 9.0 * max(len(w) - 1, 1))
-        out[li] = (trend, agree, w, mid, off, n)
+        sxx = sxy = 0.0
+        for k in np.unique(wire):
+            on = wire == k
+            if on.sum() < 2:
+                continue
+            ds = mid[on] - v[on] @ mid[on] / v[on].sum()
+            sxx += float(v[on] @ ds ** 2)
+            sxy += float(v[on] @ (ds * (off[on] - v[on] @ off[on] / v[on].sum())))
+        out[li] = (trend, agree, w, mid, off, n, sxy / sxx if sxx > 0 else None)
     return out
 
 
@@ -1185,10 +1197,15 @@ def _realign(lines, geo, spans, params, hu, min_drift_m: float | None = None, ma
 
     turn = {}
     drift = params["band_m"] if min_drift_m is None else min_drift_m
-    for li, (trend, agree, w, mid, off, n) in _plan_trends(spans, params).items():
+    for li, (trend, agree, w, mid, off, n, between) in _plan_trends(spans, params).items():
         if max_spans is not None and len(w) > max_spans:
             continue
-        if abs(trend) * (geo[li][3] - geo[li][2]) > drift and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree:
+        length = geo[li][3] - geo[li][2]
+        # where a wire holds several spans, their offsets from one to the next must drift too: the
+        # spans' own slopes, tens of metres each, can share a bias of a few 1e-4 (a sparse scan's
+        # pattern along them) that no drift of the wire across the line bears out
+        confirmed = between is None or (between * trend > 0 and abs(between) * length > drift)
+        if abs(trend) * length > drift and abs(trend) > 3.0 / np.sqrt(w.sum()) and agree and confirmed:
             pivot = float(w @ mid / w.sum())
             # the line moves onto its wire there: the offset most of its points share (another
             # line's wire its lean let into the band is out-numbered)
@@ -1252,11 +1269,16 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
     moved = {}  # original conductor -> [(new index, offset trend (slope, intercept))]
     plan = _plan_trends(spans, params)
     for li in range(len(geo)):
-        # spans along the line (within 1 deg, as _along) whose offset drifts less than half the gap
-        # over their length: a jumper at a tower, or a longer piece there crossing between two
-        # wires, has its middle between their groups and would chain them into one
+        # spans along the line (within 1 deg, as _along) that lie at one offset: a jumper at a
+        # tower, a piece there drifting half the gap across, or one whose points are two wires'
+        # (scattered across as two wires half the gap apart would be, over the line's own wires'
+        # scatter) has its middle between their groups and would chain them into one
         trend, agree = plan.get(li, (0.0, False))[:2]
-        mine = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX and
+        along = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
+        if len(along) < 2:
+            continue
+        max_scatter = np.hypot(np.median([sp.offset_rms for sp in along]), 0.25 * min_gap_m)
+        mine = [sp for sp in along if sp.offset_rms <= max_scatter and
                 abs(sp.offset_slope - (trend if agree else 0.0)) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
         if len(mine) < 2:
             continue
@@ -1280,15 +1302,28 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
         cover = sum(sp.s_to - sp.s_from for sp in mine)
         groups = [g for g in groups if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
             params["s_min_m"], 0.5 * cover / len(groups))] if len(groups) > 1 else groups
-        if not groups or (len(groups) < 2 and np.ptp(mid[groups[0]]) > 0.5 * min_gap_m):
+        if not groups:
             continue
+        to_centre = np.zeros(len(mine))
+        if len(groups) < 2 and np.ptp(mid[groups[0]]) > 0.5 * min_gap_m:
+            # one phase whose sub-conductors lie closer than min_gap_m in plan (a triangle
+            # bundle): its line runs through the middle of the outermost, not through its points'
+            # centroid, which a sub-conductor holding more points pulls off by centimetres (a
+            # crossing at 25 deg by 2.4 times as much); each as long as the groups above
+            wires = [r for r in runs if sum(mine[k].s_to - mine[k].s_from for k in r) >= max(
+                params["s_min_m"], 0.5 * cover / len(runs))]
+            if len(wires) < 2:
+                continue
+            centre = 0.5 * (np.median(mid[wires[0]]) + np.median(mid[wires[-1]]))
+            for r in runs:
+                to_centre[r] = centre - np.median(mid[r])
         a, d, t0, t1 = geo[li]
         n = np.array([-d[1], d[0]])
         trends = []
         for g in groups:  # the group's offset along the line: its spans' trends, sampled at both ends
             ss = np.concatenate([[mine[k].s_from, mine[k].s_to] for k in g])
-            oo = np.concatenate([[mine[k].offset + mine[k].offset_slope * mine[k].s_from,
-                                  mine[k].offset + mine[k].offset_slope * mine[k].s_to] for k in g])
+            oo = np.concatenate([[mine[k].offset + mine[k].offset_slope * mine[k].s_from + to_centre[k],
+                                  mine[k].offset + mine[k].offset_slope * mine[k].s_to + to_centre[k]] for k in g])
             trends.append(line_fit(ss, oo) if np.ptp(ss) > 0 else (0.0, float(np.median(oo))))
         moved[li] = []
         for gi, (g, (o1, o0)) in enumerate(zip(groups, trends)):
