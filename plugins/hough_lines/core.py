@@ -133,8 +133,7 @@ def detect_lines(x, y, new_accumulator, *, theta_step_deg: float = 0.1, rho_step
     the box of the points, the only ones voted.
     ``fit_points``: "inverse" refits each line on its inverse-Hough points (the paper's choice,
     quantised to the ρ bin), "band" on the points within ±band_m (sharper).
-    ``v_max_spacings`` > 0: a peak validated by the method (on its inverse-Hough points, or on its
-    band's where those leave no run: a sparse wire's ρ bin holds part of it) has its runs taken with a V_max of at
+    ``v_max_spacings`` > 0: a peak validated by the method has its runs taken with a V_max of at
     least that many times the median gap between its inverse-Hough points, up to S_min / 2 (a
     sparse wire among dense ones: an earth wire over a stack seen from the street, validated in
     stretches); 0: the method's fixed V_max.
@@ -178,11 +177,6 @@ def _extract_peaks(x, y, acc, thetas, cos_t, sin_t, k_min, rho_step_m, *, band_m
         # along-line positions: t = -x sinθ + y cosθ
         t_inv = -x[inverse] * sin_t[c] + y[inverse] * cos_t[c]
         runs = runs_along(t_inv, v_max_m, s_min_m)
-        if not runs and v_max_spacings:
-            # a sparse wire's inverse-Hough points (its ρ bin) may leave no run of the method's; its
-            # band's points, all of the wire, may: the method's validation, on them
-            t_inv = -x[band] * sin_t[c] + y[band] * cos_t[c]
-            runs = runs_along(t_inv, v_max_m, s_min_m)
         v_line = v_max_m
         if runs and v_max_spacings:
             # a line the method validates runs on at its own points' spacing: a sparse wire's

@@ -19,10 +19,9 @@ PARAMETERS = [
     Parameter("s_min_m", float, 8.0, "S_min: shortest run of points that makes a conductor", unit="m", minimum=0.0),
     Parameter("v_max_m", float, 2.5, "V_max: largest gap between consecutive points of a run", unit="m",
               minimum=0.01),
-    Parameter("v_max_spacings", float, 0.0, "where > 0, a validated peak (on its inverse-Hough points, or its band's "
-              "where those leave no run) has its runs taken with a V_max of at least this many median gaps between "
-              "its inverse-Hough points, up to S_min / 2 (a sparse wire among dense ones, validated in stretches); "
-              "0: V_max alone (the method)", minimum=0.0, maximum=100.0),
+    Parameter("v_max_spacings", float, 0.0, "where > 0, a validated peak's runs are taken with a V_max of at least "
+              "this many median gaps between its inverse-Hough points, up to S_min / 2 (a sparse wire among dense "
+              "ones, validated in stretches); 0: V_max alone (the method)", minimum=0.0, maximum=100.0),
     Parameter("tile_size_m", float, 100.0, "tile size (0: one tile)", unit="m", minimum=0.0, maximum=100000.0),
     Parameter("overlap_m", float, 10.0, "tile overlap", unit="m", minimum=0.0, maximum=1000.0),
     Parameter("merge_gap_m", float, 100.0, "collinear pieces (within 1 degree and 0.25 m) this close along the "
