@@ -432,8 +432,7 @@ def _run(inputs, params, ctx):
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
     if (len(cond) == 0 or params["cell_size_m"] is not None) and linear.sum() >= 200 and n_th < 0.15 * linear.sum():
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
-        # opening keeps, and the top-hat throws the wires away (the second pass may still find the
-        # sparsest few)
+        # opening keeps, and the top-hat throws the wires away
         ctx.log.warning(
             "powerlines: the top-hat kept %d of %d wire-like points and %d conductors were found; conductors "
             "hanging side by side within 3 x cell_size_m=%g merge into a band the opening removes - "
@@ -1274,19 +1273,20 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
         # (scattered across as two wires half the gap apart would be, over the line's own wires'
         # scatter) has its middle between their groups and would chain them into one
         trend, agree = plan.get(li, (0.0, False))[:2]
+        lean = trend if agree else 0.0
         along = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
         if len(along) < 2:
             continue
         max_scatter = np.hypot(np.median([sp.offset_rms for sp in along]), 0.25 * min_gap_m)
         mine = [sp for sp in along if sp.offset_rms <= max_scatter and
-                abs(sp.offset_slope - (trend if agree else 0.0)) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
+                abs(sp.offset_slope - lean) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
         if len(mine) < 2:
             continue
         # span middles' offsets about the wires' own plan trend: the Hough's line can lie across
         # two phases at a small angle, so that one phase's offset drifts along it by a good part
         # of the gap to the next
         smid = np.array([0.5 * (sp.s_from + sp.s_to) for sp in mine])
-        mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - (trend if agree else 0.0) * smid
+        mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - lean * smid
         order = np.argsort(mid)
         # runs of span offsets without a gap of half min_gap_m, then neighbouring runs whose
         # middles lie closer than min_gap_m joined
@@ -1300,8 +1300,11 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
         # a group is a wire along the line: S_min or more, and half the length its spans cover (a piece
         # of a neighbouring wire at the line's end, a tower's arms and jumpers are not)
         cover = sum(sp.s_to - sp.s_from for sp in mine)
-        groups = [g for g in groups if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
-            params["s_min_m"], 0.5 * cover / len(groups))] if len(groups) > 1 else groups
+
+        def long_enough(parts):
+            return [g for g in parts if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
+                params["s_min_m"], 0.5 * cover / len(parts))]
+        groups = long_enough(groups) if len(groups) > 1 else groups
         if not groups:
             continue
         to_centre = np.zeros(len(mine))
@@ -1310,8 +1313,7 @@ def _side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, mi
             # bundle): its line runs through the middle of the outermost, not through its points'
             # centroid, which a sub-conductor holding more points pulls off by centimetres (a
             # crossing at 25 deg by 2.4 times as much); each as long as the groups above
-            wires = [r for r in runs if sum(mine[k].s_to - mine[k].s_from for k in r) >= max(
-                params["s_min_m"], 0.5 * cover / len(runs))]
+            wires = long_enough(runs)
             if len(wires) < 2:
                 continue
             centre = 0.5 * (np.median(mid[wires[0]]) + np.median(mid[wires[-1]]))
