@@ -3333,6 +3333,25 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
         out = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 15
         labelled_15 = np.asarray(src.classification) == 15
         assert (out & labelled_15).sum() >= 0.6 * out.sum() and (out & labelled_15).sum() >= 0.5 * labelled_15.sum()
+    # a cable's end clamped to a pole's side, 4-8 m under its top, is the pole's (CMU: pole), not
+    # a wire's: no wire point inside a found pole's column under its head (part2_ai had 5, part3_an 12)
+    cls = np.asarray(laspy.read(tmp_path / "w.laz").classification)
+    x, y, z = np.asarray(src.x), np.asarray(src.y), np.asarray(src.z)
+    for g, height in zip(poles.geometry, poles["height_m"] if len(poles) else []):
+        column = (np.hypot(x - g.x, y - g.y) <= 0.3) & (z < g.z + height - 1.0)
+        assert not (column & (cls == 14)).any(), (g.x, g.y, int((column & (cls == 14)).sum()))
+
+
+def test_in_pole_columns_takes_what_is_clamped_to_a_pole_not_its_head():
+    """A pole 10 m high at (0, 0): a cable's end at its side 5 m up is in its column, the top
+    wire on its head (9.5 m), a cross arm's wire 0.8 m off its axis and a point 0.4 m off it are not."""
+    from toolbox_plugins.powerlines.core import in_pole_columns
+
+    x = np.array([0.1, 0.0, 0.8, 0.4, 0.05])
+    y = np.array([0.1, 0.0, 0.0, 0.0, 0.0])
+    hag = np.array([5.0, 9.5, 9.2, 5.0, 8.9])
+    assert in_pole_columns([(0.0, 0.0, 10.0)], x, y, hag).tolist() == [True, False, False, False, True]
+    assert not in_pole_columns(np.zeros((0, 3)), x, y, hag).any()
 
 
 @pytest.mark.parametrize("rel, crs", [("ahn3_amsterdam/ahn_2386_9702.laz", "EPSG:7415"),

@@ -3332,6 +3332,21 @@ def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
     return inside
 
 
+def in_pole_columns(poles_xyh, x, y, hag, core_m: float = 0.3, head_m: float = 1.0) -> np.ndarray:
+    """Which points (x, y: plan metres, hag: height above ground) lie in a pole's column: within
+    ``core_m`` in plan of its base (``poles_xyh``: (n, 3) base x, y and height above ground) and
+    more than ``head_m`` under its top. Nothing hangs there but what is fixed to the pole: a
+    cable's end clamped to its side is the pole's (as CMU's Oakland labels mark it); the wires
+    on its head (cross arms, top insulator) stay wires. ``core_m`` holds the pole's radius and a
+    street scan's lean of its base towards the scanner."""
+    x, y, hag = (np.asarray(v, float) for v in (x, y, hag))
+    out = np.zeros(len(x), bool)
+    for px, py, height in np.asarray(poles_xyh, float).reshape(-1, 3):
+        out |= (np.abs(x - px) <= core_m) & (np.abs(y - py) <= core_m) & \
+            (np.hypot(x - px, y - py) <= core_m) & (hag < height - head_m)
+    return out
+
+
 def _parallel(s1, s2, max_deg: float) -> bool:
     """Whether plan segments s1 and s2 ((a, b) each) run within ``max_deg`` of one direction."""
     d1, d2 = np.subtract(s1[1], s1[0]), np.subtract(s2[1], s2[0])

@@ -19,6 +19,10 @@ POLE_TAKES_M = 6.0
 # how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
 # grid); a lattice tower's reaches 4-8 m
 POLE_FOOTPRINT_M = 3.0
+# a pole's column: within this of its base in plan (its radius and a street scan's lean of the
+# base towards the scanner) and more than POLE_HEAD_M under its top (its arms and top insulator)
+POLE_CORE_M = 0.3
+POLE_HEAD_M = 1.0
 # how far from a wire's points a point alone in the air is still taken for its: the closest two
 # wires of a line hang on their supports (a ribbon's or a joint-use pole's cables, 0.3-0.5 m)
 ALONE_REACH_M = 0.5
@@ -375,6 +379,20 @@ def _run(inputs, params, ctx):
         wire_of_input[around[taken]] = wire_of_input[around[via]]
         n_alone = len(taken)
         timings["alone_beside_wires_s"] = time.perf_counter() - t
+    n_pole_column = 0
+    poles = [p for p in found if p.extent_m() <= POLE_FOOTPRINT_M]
+    if poles and (conductor_of >= 0).any():
+        # a wire point inside a pole's column under its head is the pole's: a cable's end clamped
+        # to its side, which the span's growth or the lone points carried onto the pole
+        from .core import in_pole_columns
+
+        wire_pt = np.flatnonzero(conductor_of >= 0)
+        inside = wire_pt[in_pole_columns([(p.x, p.y, p.height_m) for p in poles], pc.x[wire_pt] * hu,
+                                         pc.y[wire_pt] * hu, hag[wire_pt], core_m=POLE_CORE_M, head_m=POLE_HEAD_M)]
+        conductor_of = conductor_of.copy()
+        conductor_of[inside] = -1
+        tower_pt[inside] = True
+        n_pole_column = len(inside)
     # the plan layers (and so the crossings) of a line one span holds settle on that span's trend
     # where it drifts off the line by more than the crossings' tolerance: a wire seen over one
     # stretch from one side, leant by the points of a line crossing it in its band (the 3D step
@@ -443,7 +461,7 @@ def _run(inputs, params, ctx):
              "surface_density_used": round(float(np.median(surface_density)), 2) if len(surface_density) else None,
              "cell_size_m_used": cell_used, "v_max_m_used": params["v_max_m"], "wire_spacing_m": None if spacing is None else round(spacing, 3), "n_short_wires": n_short, "n_pole_wires": n_pole_wires, "n_sibling_wires": n_sibling, "n_next_spans": n_next, "n_bridged_gaps": n_bridges, "n_side_by_side": n_side, "n_crowded_spans": n_crowded, "n_lines_realigned": timings.pop("n_lines_realigned", 0), "n_twin_lines_merged": timings.pop("n_twin_lines_merged", 0), "n_not_wires": len(not_wires), "n_surface_lines": len(surfaces), "n_conductors": len(cond), "n_wires_3d": len({(s.conductor, s.wire) for s in spans}),
              "n_spans": len(spans), "n_crossings": len(crossings), "n_wire_points": int((conductor_of >= 0).sum()),
-             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_alone_points": n_alone, "alone_max_around_used": max_around, "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
+             "n_grown_points": int((conductor_of[grown] >= 0).sum()), "n_alone_points": n_alone, "n_pole_column_points": n_pole_column, "alone_max_around_used": max_around, "n_off_trend_points": len(off_trend), "n_foliage_points": len(foliage),
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
