@@ -393,10 +393,10 @@ def test_lines_either_side_of_one_wire_are_twins(apart_m, twins):
     assert twin_lines(spans, lines, 0.2, 8.0, 1.0) == twins
 
 
-@pytest.mark.xfail(strict=True, reason="#16 open: the 3D step links the stack into one piece (z_link 1 m) "
-                   "and split_spans cuts it where the mixture's slope wanders; local layers, heights levelled "
-                   "layer by layer, and one shape per span with each cable's offset pass it, but none helped "
-                   "the variant family's stacks (see the issue note), so none is in")
+@pytest.mark.xfail(strict=True, reason="known limit (README, docs/powerlines.md): the 3D step links the stack into one "
+                   "piece (z_link 1 m) and split_spans cuts it where the mixture's slope wanders; local layers, "
+                   "heights levelled layer by layer, and one shape per span with each cable's offset pass it, "
+                   "but none helped the variant family's stacks, so none is in")
 def test_a_stack_of_cables_over_two_spans_is_one_wire_per_cable_per_span():
     """Three cables 0.3 m apart one above another (a joint-use pole's), two 40 m spans on a 10 %
     climb with the pole between, each cable missing its points over a different stretch (their
