@@ -3342,8 +3342,7 @@ def in_pole_columns(poles_xyh, x, y, hag, core_m: float = 0.3, head_m: float = 1
     x, y, hag = (np.asarray(v, float) for v in (x, y, hag))
     out = np.zeros(len(x), bool)
     for px, py, height in np.asarray(poles_xyh, float).reshape(-1, 3):
-        out |= (np.abs(x - px) <= core_m) & (np.abs(y - py) <= core_m) & \
-            (np.hypot(x - px, y - py) <= core_m) & (hag < height - head_m)
+        out |= (np.hypot(x - px, y - py) <= core_m) & (hag < height - head_m)
     return out
 
 
