@@ -9,10 +9,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
 import textwrap
 
-from . import __version__, kernels, progress
+from . import __version__, kernels, progress, signals
 from .errors import ToolboxError, UsageError
 
 log = logging.getLogger("toolbox")
@@ -171,8 +172,13 @@ def _print_report(rep: dict) -> None:
         elif info["kind"] == "vector":
             detail = ", ".join(f"{k}: {v}" for k, v in info["layers"].items())
         print(f"  {name:<14} {info['path']}  ({detail})" if detail else f"  {name:<14} {info['path']}")
+    if rep.get("stats", {}).get("note"):
+        print(f"  note: {rep['stats']['note']}")
+    for name, n in (rep.get("dropped_points") or {}).items():
+        print(f"  note: {n:,} points of {rep.get('inputs', {}).get(name, name)} had a NaN or infinite coordinate and "
+              "were left out")
     if rep.get("stats"):
-        short = {k: v for k, v in rep["stats"].items() if isinstance(v, (int, float, str))}
+        short = {k: v for k, v in rep["stats"].items() if isinstance(v, (int, float, str)) and k != "note"}
         if short:
             print("  " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in list(short.items())[:8]))
 
@@ -181,6 +187,8 @@ def cmd_run(args) -> int:
     from .registry import registry
     from .runner import is_batch, run_algorithm, run_batch
 
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"-j {args.jobs}: give 1 or more worker processes (or leave -j out for one per core)")
     reg = registry()
     alg = reg.get(args.algorithm)
     params = _pairs(args.params, "--set")
@@ -264,6 +272,7 @@ COMMANDS = {"list": cmd_list, "help": cmd_help, "run": cmd_run, "pipeline": cmd_
 
 
 def main(argv=None) -> int:
+    signals.install()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not args.command:
@@ -272,21 +281,32 @@ def main(argv=None) -> int:
     try:
         _setup(args)
         return COMMANDS[args.command](args)
-    except ToolboxError as exc:
+    except BaseException as exc:  # noqa: BLE001 - every way out is one line and an exit code
+        return _report_failure(exc, args)
+
+
+def _report_failure(exc: BaseException, args) -> int:
+    signum = signals.received()
+    if signum is not None or isinstance(exc, (KeyboardInterrupt, signals.Terminated)):
+        # whatever the interrupt turned into on its way up (lazrs: an I/O error), it was the signal
+        signum = signum or (signal.SIGINT if isinstance(exc, KeyboardInterrupt) else exc.signum)
+        what = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"terminated (signal {int(signum)})"
+        print(f"toolbox: {what}; no output of the unfinished run was kept", file=sys.stderr)
+        return signals.exit_code(signum)
+    if isinstance(exc, ToolboxError):
         print(f"toolbox: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("toolbox: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into head & co.
+    if isinstance(exc, BrokenPipeError):  # output piped into head & co.
         return 0
-    except Exception as exc:  # a plugin's bug: one line, the traceback with -v
-        log.debug("unexpected error", exc_info=True)
-        name = getattr(args, "algorithm", None) if args.command == "run" else None
-        where = f"algorithm {name!r} failed" if name else f"{args.command} failed"
-        print(f"toolbox: error: {where}: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} "
-              "(run with -vv for the traceback)", file=sys.stderr)
-        return 1
+    log.debug("unexpected error", exc_info=True)
+    name = getattr(args, "algorithm", None) if args.command == "run" else None
+    where = f"algorithm {name!r} failed" if name else f"{args.command} failed"
+    if isinstance(exc, SystemExit):  # a plugin called sys.exit()
+        detail = f"it called sys.exit({exc.code!r})"
+    else:
+        detail = f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
+    print(f"toolbox: error: {where}: {detail} (run with -vv for the traceback)", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

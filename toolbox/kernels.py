@@ -20,11 +20,12 @@ _lock = threading.Lock()
 _ti = None
 _arch_requested: str | None = None
 _arch_used: str | None = None
+_warned_fallback = False  # the CUDA fallback was already announced (once per process)
 
 
 def set_arch(arch: str | None) -> None:
     """Request an architecture before the first kernel runs (later requests cannot change it)."""
-    global _arch_requested
+    global _arch_requested, _warned_fallback
     if arch is None:
         return
     if arch not in ARCHES:
@@ -32,6 +33,9 @@ def set_arch(arch: str | None) -> None:
     if _ti is not None and arch != "auto" and arch != _arch_used:
         log.warning("taichi already runs on %s; --arch %s ignored", _arch_used, arch)
     _arch_requested = arch
+    if arch == "cuda" and _ti is None and not _warned_fallback and not _cuda_present():
+        _warned_fallback = True
+        log.warning("--arch cuda: no CUDA driver found here; the kernels will run on the CPU")
 
 
 def started() -> bool:
@@ -77,6 +81,9 @@ def taichi():
                 raise UsageError(f"taichi cannot run on {arch} here ({exc}); use --arch cpu") from None
         _arch_used = str(ti.lang.impl.current_cfg().arch).split(".")[-1]
         log.info("taichi initialised on %s", _arch_used)
+        if arch in ("cuda", "vulkan") and _arch_used != arch and not _warned_fallback:
+            log.warning("--arch %s: taichi found no %s device here; the kernels run on the CPU (%s)", arch, arch,
+                        _arch_used)
         _ti = ti
         return ti
 

@@ -88,12 +88,7 @@ def run(stages: list[dict], *, overwrite: bool = False, crs: str | None = None, 
     from .runner import run_algorithm
 
     reg = reg or registry()
-    # check every algorithm and parameter before the first stage runs
-    for i, st in enumerate(stages, 1):
-        try:
-            reg.get(st["algorithm"]).validate_params(st.get("params") or {})
-        except UsageError as exc:
-            raise UsageError(f"pipeline stage {i}: {exc}") from None
+    check_plan(stages, reg)
     done: dict[str, dict] = {}
     reports = []
     prev = None
@@ -127,6 +122,64 @@ def run(stages: list[dict], *, overwrite: bool = False, crs: str | None = None, 
                 if info["path"].startswith(tmp):
                     info["path"] = None
     return {"stages": reports}
+
+
+def check_plan(stages: list[dict], reg) -> None:
+    """Everything that can be checked before the first stage runs: algorithms and parameters, each
+    reference (to an earlier stage, to an output it writes), the kind of file each input gets, and
+    that no two stages write one file."""
+    import os
+
+    from .algorithm import OUTPUT_EXTENSIONS
+    from .runner import assign_inputs, plan_outputs
+
+    declared: dict[str, tuple] = {}  # stage name -> (algorithm, outputs it writes)
+    writers: dict[str, int] = {}
+    prev = None
+    for i, st in enumerate(stages, 1):
+        name = st.get("name", f"stage{i}")
+        try:
+            alg = reg.get(st["algorithm"])
+            alg.validate_params(st.get("params") or {})
+        except UsageError as exc:
+            raise UsageError(f"pipeline stage {i}: {exc}") from None
+        asked = set(st.get("outputs") or {})
+        writes = {o.name: o for o in alg.outputs if not o.optional or o.name in asked}
+        stand_ins = []  # each input as a file name of its kind (references: the output they name)
+        refs = st["inputs"] if "inputs" in st else ([f"@{prev}"] if prev is not None and alg.inputs else [])
+        for item in refs:
+            m = _REF.match(item)
+            if not m:
+                if item.startswith("@"):
+                    raise UsageError(f"pipeline stage {i}: bad reference {item!r}; use @stage or @stage.output")
+                stand_ins.append(item)
+                continue
+            ref_stage, ref_out = m.groups()
+            if ref_stage not in declared:
+                raise UsageError(f"pipeline stage {i}: {item!r} refers to a stage that does not run before it")
+            ref_alg, ref_writes = declared[ref_stage]
+            out = ref_writes.get(ref_out or ref_alg.outputs[0].name)
+            if out is None:
+                raise UsageError(f"pipeline stage {i}: stage {ref_stage!r} ({ref_alg.id}) writes no output {ref_out!r}; "
+                                 f"it writes {sorted(ref_writes)} (an optional one only when asked in its 'outputs')")
+            stand_ins.append(f"{ref_stage}.{out.name}{OUTPUT_EXTENSIONS[out.kind][0]}")
+        try:
+            assign_inputs(alg, stand_ins)
+            if st.get("output"):
+                stem = Path(stand_ins[0]).stem if stand_ins else None
+                paths = plan_outputs(alg, st["output"], st.get("outputs"), stem)
+                for out_name, p in paths.items():
+                    if out_name not in writes or writes[out_name].kind == "folder":
+                        continue
+                    key = os.path.realpath(p)
+                    if key in writers:
+                        raise UsageError(f"stages {writers[key]} and {i} both write {str(p)!r}; give one of them "
+                                         "another output")
+                    writers[key] = i
+        except UsageError as exc:
+            raise UsageError(f"pipeline stage {i} ({alg.id}): {exc}") from None
+        declared[name] = (alg, writes)
+        prev = name
 
 
 def _primary(rep: dict) -> str:

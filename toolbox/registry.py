@@ -84,7 +84,8 @@ def discover(entry_points=None) -> Registry:
         try:
             obj = ep.load()
             pm.register(obj, name=ep.name)
-        except Exception as exc:  # a broken third-party plugin must not take the host down
+        except BaseException as exc:  # a broken third-party plugin (even sys.exit) must not take the host down
+            _reraise_if_signalled(exc)
             reg.broken.append(BrokenPlugin(ep.name, dist_name, version, f"failed to load: {_one_line(exc)}"))
             log.debug("plugin %s failed to load", ep.name, exc_info=True)
             continue
@@ -95,7 +96,8 @@ def discover(entry_points=None) -> Registry:
             for a in algs:
                 if not isinstance(a, Algorithm):
                     raise TypeError(f"toolbox_algorithms returned {type(a).__name__}, not toolbox.Algorithm")
-        except Exception as exc:
+        except BaseException as exc:
+            _reraise_if_signalled(exc)
             pm.unregister(obj)
             reg.broken.append(BrokenPlugin(ep.name, dist_name, version, f"hook failed: {_one_line(exc)}"))
             log.debug("plugin %s failed in a hook", ep.name, exc_info=True)
@@ -131,7 +133,20 @@ def _call_one(pm: pluggy.PluginManager, hook_name: str, plugin) -> object:
     return None
 
 
+def _reraise_if_signalled(exc: BaseException) -> None:
+    """Ctrl-C and SIGTERM stop the host; a KeyboardInterrupt a plugin raises itself does not
+    (told apart by the host's signal handler; without it, every KeyboardInterrupt is Ctrl-C)."""
+    from . import signals
+
+    if isinstance(exc, signals.Terminated) or signals.received() is not None:
+        raise exc
+    if isinstance(exc, KeyboardInterrupt) and not signals.installed():
+        raise exc
+
+
 def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, SystemExit):
+        return f"called sys.exit({exc.code!r})"
     text = f"{type(exc).__name__}: {exc}"
     return " ".join(text.split())[:300]
 

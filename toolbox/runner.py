@@ -41,6 +41,9 @@ class Context:
     stats: dict[str, Any] = field(default_factory=dict)
     requested: frozenset = frozenset()
     _writer: Any = None  # the run's _OutputWriter (file runs only)
+    #: the algorithm the user ran, when this one runs inside it (``ctx.call``); "" at the top. An
+    #: error should then name what the user can change (its parameters, or tiling), not this one's
+    caller: str = ""
 
     def wants(self, output_name: str) -> bool:
         """Whether an optional output was asked for (required outputs are always wanted)."""
@@ -87,7 +90,7 @@ class Context:
         """Run another algorithm in memory on data (not files); returns its Result."""
         alg = self.registry.get(algorithm_id)
         values = alg.validate_params(params)
-        sub = Context(self.registry, algorithm_id, self.quiet)
+        sub = Context(self.registry, algorithm_id, self.quiet, caller=self.caller or self.algorithm_id)
         return _as_result(alg.run(dict(inputs), values, sub), alg)
 
 
@@ -168,17 +171,19 @@ def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, 
                  stem: str | None = None) -> dict[str, Path]:
     """Paths of every output: the primary at ``output`` (or ``output/<stem><ext>`` for a folder),
     the others at ``<stem>_<name><ext>`` beside it, unless ``named`` gives a path for them."""
+    from .io.atomic import check_name_length
+
     named = dict(named or {})
     known = {o.name for o in alg.outputs}
     for n in named:
         if n not in known:
             raise UsageError(f"{alg.id} has no output {n!r}; its outputs: {', '.join(sorted(known))}")
+    for p in (output, *named.values()):
+        check_name_length(Path(p))  # (before anything asks the file system about it)
     out = Path(output)
     primary = alg.outputs[0]
     is_dir = out.is_dir() or str(output).endswith(os.sep) or not out.suffix
-    if is_dir:
-        if not out.exists():
-            raise DataError(f"output folder {str(out)!r} does not exist; create it first")
+    if is_dir:  # a missing folder is made by the run (see prepare_folder)
         base = out / (stem or primary.name)
         primary_path = base.with_name(base.name + primary.extension)
     else:
@@ -197,6 +202,81 @@ def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, 
             raise UsageError(f"output {str(p)!r}: {alg.id}'s output {o.name!r} is {o.kind}; use {', '.join(OUTPUT_EXTENSIONS[o.kind])}")
         paths[o.name] = p
     return paths
+
+
+def sidecars_of(output, path: Path, style_dirs) -> list[Path]:
+    """The files written beside an output: a raster's QGIS style, a picture's world file and GDAL
+    metadata. They are outputs too: never replaced without --overwrite."""
+    from .io.styles import find_style
+
+    if output.kind == "raster" and output.style and find_style(output.style, style_dirs) is not None:
+        return [path.with_suffix(".qml")]
+    if output.kind == "image":
+        return [path.with_suffix(".wld"), path.with_name(path.name + ".aux.xml")]
+    return []
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_not_inputs(paths: Mapping[str, Path], input_files: Sequence[str]) -> None:
+    """Refuse any output (or sidecar) that is one of the inputs, whatever --overwrite says."""
+    for name, p in paths.items():
+        for f in input_files:
+            if _same_file(Path(p), Path(f)):
+                raise UsageError(f"output {str(p)!r} is the input {str(f)!r}; the toolbox never replaces an input: "
+                                 "give the output another name or folder")
+
+
+def _input_files(assigned: Mapping[str, Any]) -> list[str]:
+    files = []
+    for v in assigned.values():
+        files.extend(str(x) for x in (v if isinstance(v, list) else [v]) if isinstance(x, (str, os.PathLike)))
+    return files
+
+
+def prepare_folder(folder: Path, staging) -> None:
+    """Make the folder an output goes into when it is missing (removed again if the run fails)."""
+    folder = Path(folder) if str(folder) else Path(".")
+    p = folder
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    if p.exists() and not p.is_dir():
+        where = f"output folder {str(folder)!r}" + ("" if p == folder else f" cannot be made: {str(p)!r}")
+        raise DataError(f"{where} is a file, not a folder; choose another output location")
+    if folder.exists():
+        return
+    try:
+        staging.make_dirs(folder)
+    except OSError as exc:
+        raise DataError(f"output folder {str(folder)!r} cannot be made ({exc.strerror}); choose another output "
+                        "location") from None
+
+
+def parameters_used(alg: Algorithm, values: Mapping[str, Any], stats: Mapping[str, Any]) -> tuple[dict, list]:
+    """Every parameter's value as the run used it: an ``auto`` one (None) takes the value the
+    algorithm reported as ``<name>_used``. Returns (values, names that were auto)."""
+    used, auto = dict(values), []
+    for p in alg.parameters:
+        if p.allow_auto and values.get(p.name) is None:
+            auto.append(p.name)
+            used[p.name] = stats.get(f"{p.name}_used")
+    return used, auto
+
+
+def _crs_label(crs) -> str | None:
+    if crs is None:
+        return None
+    ident = crs.to_json_dict().get("id") or {}
+    if ident.get("authority") and ident.get("code"):
+        return f"{ident['authority']}:{ident['code']}"
+    return crs.name
 
 
 # --------------------------------------------------------------------------------------------
@@ -251,8 +331,11 @@ def write_output(kind: str, data: Any, path: Path, style_dirs, overwrite: bool) 
             raise TypeError(f"raster output must be a Raster, got {type(data).__name__}")
         write_raster(data, path, style_dirs=style_dirs, overwrite=overwrite)
         rows, cols = data.shape
+        from .io.styles import find_style
+
+        styled = bool(data.style) and find_style(data.style, style_dirs) is not None  # (staged: not there yet)
         return {"width": int(cols), "height": int(rows), "cell_size": data.cell_size,
-                "style": str(path.with_suffix(".qml")) if path.with_suffix(".qml").exists() else None}
+                "style": str(path.with_suffix(".qml")) if styled else None}
     if kind == "vector":
         from .io.vectors import write_vectors
 
@@ -316,8 +399,11 @@ class _OutputWriter:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="toolbox-write")
-        self.futures[name] = self._pool.submit(write_output, self.kinds[name], value, self.paths[name],
-                                               self.style_dirs, self.overwrite)
+        import contextvars
+
+        # the write runs in the run's context: its files are staged with the others
+        self.futures[name] = self._pool.submit(contextvars.copy_context().run, write_output, self.kinds[name], value,
+                                               self.paths[name], self.style_dirs, self.overwrite)
 
     def finish(self) -> dict:
         """Write the queued outputs here, wait for those in flight; the summaries, or the first
@@ -345,21 +431,14 @@ class _OutputWriter:
         return written
 
     def discard(self) -> None:
-        """Wait for writes in flight, then remove every file this run wrote."""
-        done = []
-        for name, fut in self.futures.items():
+        """Wait for writes in flight (their files are staged: the run's rollback removes them, and
+        a file of the same name from before stays as it was)."""
+        for fut in self.futures.values():
             try:
-                done.append((name, fut.result()))
-            except BaseException:  # noqa: BLE001 - the run is failing anyway; a failed write left nothing
+                fut.result()
+            except BaseException:  # noqa: BLE001 - the run is failing anyway
                 pass
         self._close()
-        for name, summary in done:
-            if self.kinds[name] == "folder":
-                from .io.atomic import remove_entries
-
-                remove_entries(self.paths[name], summary.get("entries", []))
-            else:
-                Path(self.paths[name]).unlink(missing_ok=True)
 
     def _close(self):
         if self._pool is not None:
@@ -405,12 +484,22 @@ def run_algorithm(
     ``{input name: path or list of paths}``. Everything is validated before any work starts.
     """
     t0 = time.perf_counter()
+    from .io.atomic import staged_outputs
+
+    with staged_outputs() as staging:
+        rep = _run_staged(algorithm_id, inputs, output, params, outputs, overwrite, crs, reg, staging, t0)
+        staging.commit()
+    return rep
+
+
+def _run_staged(algorithm_id, inputs, output, params, outputs, overwrite, crs, reg, staging, t0) -> dict:
     from .memory import tune_allocator
 
     tune_allocator()  # arrays reuse freed memory instead of faulting fresh pages in (see memory.py)
     reg = reg or registry()
     alg = reg.get(algorithm_id)
     values = alg.validate_params(params or {})
+    crs_given = crs
     if crs is not None:
         from .io.points import parse_crs
 
@@ -429,11 +518,20 @@ def run_algorithm(
     from .io.atomic import check_folder, check_writable
 
     kinds = {o.name: o.kind for o in alg.outputs}
+    by_name = {o.name: o for o in alg.outputs}
+    every_file = {}
     for name, p in paths.items():
+        if kinds[name] != "folder":
+            every_file[name] = p
+            for i, side in enumerate(sidecars_of(by_name[name], Path(p), reg.style_dirs)):
+                every_file[f"{name} sidecar {i}"] = side
+    check_not_inputs(every_file, _input_files(assigned))
+    for name, p in paths.items():
+        prepare_folder(p if kinds[name] == "folder" else Path(p).parent, staging)
         if kinds[name] == "folder":
             check_folder(p)
-        else:
-            check_writable(p, overwrite)
+    for p in every_file.values():
+        check_writable(p, overwrite)
 
     specs = {s.name: s for s in alg.inputs}
     # a run that writes points writes every dimension: read them all; otherwise only the declared
@@ -467,13 +565,18 @@ def run_algorithm(
     t_write = time.perf_counter()
     stats = dict(ctx.stats)
     stats.update(result.stats)
+    used, auto = parameters_used(alg, values, stats)
     return {
         "algorithm": alg.id,
         "plugin": alg.plugin,
         "distribution": alg.distribution,
         "version": alg.version,
         "inputs": {k: v for k, v in assigned.items()},
-        "parameters": values,
+        "parameters": used,
+        "parameters_auto": auto,
+        "crs": {"given": crs_given if crs_given is None or isinstance(crs_given, str) else _crs_label(crs_given),
+                "inputs": _input_crs(data)},
+        "dropped_points": _dropped(data),
         "outputs": written,
         "stats": stats,
         "taichi_arch": kernels.arch_used(),
@@ -484,6 +587,30 @@ def run_algorithm(
             "total": round(t_write - t0, 4),
         },
     }
+
+
+def _clouds(data: Mapping[str, Any]):
+    from .io.points import PointCloud
+
+    for name, value in data.items():
+        for v in (value if isinstance(value, list) else [value]):
+            if isinstance(v, PointCloud):
+                yield name, v
+
+
+def _input_crs(data: Mapping[str, Any]) -> dict:
+    """The CRS each point input was read in (the file's, or --crs)."""
+    return {name: _crs_label(pc.crs) for name, pc in _clouds(data)}
+
+
+def _dropped(data: Mapping[str, Any]) -> dict:
+    """Points left out when the inputs were read (NaN or infinite coordinates), by input."""
+    out = {}
+    for name, pc in _clouds(data):
+        n = pc.meta.get("n_dropped_non_finite", 0)
+        if n:
+            out[name] = out.get(name, 0) + int(n)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -498,7 +625,7 @@ def expand_inputs(files: Sequence[str], kind: str) -> list[str]:
         if p.is_dir() and kind != "photos":
             found = sorted(str(q) for q in p.iterdir() if q.suffix.lower() in INPUT_EXTENSIONS[kind] and q.is_file())
             if not found:
-                raise UsageError(f"folder {f!r} holds no {KIND_WORDS[kind]} files ({', '.join(INPUT_EXTENSIONS[kind])})")
+                raise UsageError(f"folder {f!r} holds no {KIND_WORDS[kind].removeprefix('a ')} files ({', '.join(INPUT_EXTENSIONS[kind])})")
             out.extend(found)
         else:
             out.append(str(f))
@@ -520,7 +647,11 @@ def _batch_one(args) -> tuple[str, dict | None, str | None]:
         return path, rep, None
     except ToolboxError as exc:
         return path, None, str(exc)
-    except Exception as exc:  # a bug on one file must not stop the others
+    except BaseException as exc:  # a bug on one file (even sys.exit) must not stop the others
+        from . import signals
+
+        if signals.received() or isinstance(exc, signals.Terminated):
+            raise  # Ctrl-C or SIGTERM: the batch stops (this run left nothing)
         return path, None, f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}"
 
 
@@ -535,10 +666,19 @@ def run_batch(algorithm_id: str, files: Sequence[str], outdir: str, params: Mapp
     reg = reg or registry()
     alg = reg.get(algorithm_id)
     alg.validate_params(params or {})
+    if jobs is not None and jobs < 1:
+        raise UsageError(f"-j {jobs}: give 1 or more worker processes (or leave -j out for one per core)")
     files = expand_inputs(files, alg.inputs[0].kind)
     out = Path(outdir)
-    if not out.is_dir():
-        raise UsageError(f"a batch of {len(files)} files writes into a folder; {outdir!r} is not an existing folder")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"a batch of {len(files)} files writes into a folder; {outdir!r} is a file")
+    _check_batch_outputs(alg, files, out, reg)
+    created = not out.exists()
+    if created:
+        try:
+            out.mkdir(parents=True)
+        except OSError as exc:
+            raise DataError(f"output folder {outdir!r} cannot be made ({exc.strerror}); choose another location") from None
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(files)))
     arch = kernels.requested_arch()
     tasks = [(algorithm_id, f, str(out), dict(params or {}), overwrite, crs, True, arch) for f in files]
@@ -553,25 +693,67 @@ def run_batch(algorithm_id: str, files: Sequence[str], outdir: str, params: Mapp
         for t in tasks:
             futures[pool.submit(_batch_one, t)] = t[1]
             running.add(t[1])
-        for fut in cf.as_completed(futures):
-            path = futures[fut]
-            running.discard(path)
-            try:
-                path, rep, err = fut.result()
-            except Exception as exc:  # the worker died (out of memory, killed)
-                rep, err = None, f"worker died: {type(exc).__name__}: {exc}"
-            if err is None:
-                runs.append(rep)
-            else:
-                failed.append({"input": path, "error": err})
-                log.error("%s: %s", path, err)
-            bar.set_postfix_str(f"in progress {len(running)}, done {len(runs)}, failed {len(failed)}")
-            bar.update(1)
+        try:
+            _collect_batch(cf, futures, running, runs, failed, bar)
+        except BaseException:
+            stop_workers(pool, futures)
+            if created and not any(out.iterdir()):
+                out.rmdir()
+            raise
     bar.close()
     return {
         "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version,
-        "parameters": alg.validate_params(params or {}),
+        "parameters": {k: ("auto" if v is None and alg.parameter(k).allow_auto else v)
+                       for k, v in alg.validate_params(params or {}).items()},
+        "crs": {"given": crs},
         "n_files": len(files), "n_done": len(runs), "n_failed": len(failed),
         "runs": sorted(runs, key=lambda r: str(r["inputs"])), "failed": failed,
         "timings_s": {"total": round(time.perf_counter() - t0, 3)}, "jobs": jobs,
     }
+
+
+def stop_workers(pool, futures) -> None:
+    """Ctrl-C or SIGTERM during a pool run: cancel what has not started, end the workers (each
+    removes what its run had staged), wait for them."""
+    for f in futures:
+        f.cancel()
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        if proc.is_alive():
+            proc.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _check_batch_outputs(alg: Algorithm, files: Sequence[str], out: Path, reg: Registry) -> None:
+    """Before any file runs: no output is an input, and no two inputs write the same output."""
+    owner: dict[str, str] = {}
+    by_name = {o.name: o for o in alg.outputs}
+    for f in files:
+        paths = {n: p for n, p in plan_outputs(alg, out, None, Path(f).stem).items()
+                 if not by_name[n].optional and by_name[n].kind != "folder"}
+        every = dict(paths)
+        for n, p in paths.items():
+            every.update({f"{n}+{i}": side for i, side in enumerate(sidecars_of(by_name[n], Path(p), reg.style_dirs))})
+        check_not_inputs(every, files)
+        for p in every.values():
+            key = os.path.realpath(p)
+            if key in owner and owner[key] != f:
+                raise UsageError(f"inputs {owner[key]!r} and {f!r} would both write {str(p)!r} (same file name); "
+                                 "rename one or run them into different folders")
+            owner[key] = f
+
+
+def _collect_batch(cf, futures, running, runs, failed, bar) -> None:
+    for fut in cf.as_completed(futures):
+        path = futures[fut]
+        running.discard(path)
+        try:
+            path, rep, err = fut.result()
+        except Exception as exc:  # the worker died (out of memory, killed)
+            rep, err = None, f"worker died: {type(exc).__name__}: {exc}"
+        if err is None:
+            runs.append(rep)
+        else:
+            failed.append({"input": path, "error": err})
+            log.error("%s: %s", path, err)
+        bar.set_postfix_str(f"in progress {len(running)}, done {len(runs)}, failed {len(failed)}")
+        bar.update(1)

@@ -140,7 +140,7 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
     ``crs`` (text or pyproj CRS) says what they all are in."""
     import laspy
 
-    from .io.points import _header_crs, crs_units, parse_crs
+    from .io.points import _header_crs, check_las_header, crs_units, parse_crs
 
     user_crs = parse_crs(crs) if isinstance(crs, str) else crs
     files, crss = [], []
@@ -148,7 +148,11 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
         try:
             with laspy.open(path) as reader:
                 hdr = reader.header
+                check_las_header(hdr, path)
                 mins, maxs, count = hdr.mins, hdr.maxs, int(hdr.point_count)
+                if count and not (np.isfinite(mins[:2]).all() and np.isfinite(maxs[:2]).all()):
+                    raise DataError(f"input {path!r}: the LAS header's bounds are not finite, so the survey cannot "
+                                    "place it; repair the header (e.g. lasinfo -repair_bb) or re-export the file")
                 copc = any(v.user_id == "copc" and v.record_id == 1 for v in hdr.vlrs)
                 file_crs = None
                 if user_crs is None:
@@ -174,6 +178,9 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
                     "a survey is in one CRS: reproject the files to one (e.g. pdal translate, las2las), or pass "
                     "--crs if the headers are wrong")
     hu = crs_units(survey_crs)[0] if survey_crs is not None else 1.0
+    if survey_crs is None:
+        log.warning("the survey's files have no CRS; its outputs will have none: pass --crs (e.g. --crs EPSG:28992) "
+                    "to set it")
     empty = [f.path for f in files if f.count == 0]
     if len(empty) == len(files):
         raise DataError(f"the survey's {len(files)} file(s) hold no point; check the inputs")
@@ -570,6 +577,11 @@ def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None
                                                 "try a smaller --tile-size-m or fewer --workers)"})
                 if broken and not running:
                     break
+        except BaseException:  # Ctrl-C, SIGTERM: end the workers rather than wait for their tiles
+            from .runner import stop_workers
+
+            stop_workers(pool, running)
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 
@@ -663,13 +675,13 @@ def merge_rasters(paths: Sequence[Path], out: Path, style_name: str | None, styl
             with rasterio.open(vrt_path) as src:
                 rio_copy(src, tmp, driver="COG", COMPRESS="DEFLATE", PREDICTOR=predictor, BLOCKSIZE=512,
                          OVERVIEWS="AUTO", RESAMPLING="AVERAGE" if count == 1 else "NEAREST", NUM_THREADS="ALL_CPUS")
-        if style_name:
-            from .io.styles import write_raster_style
+            if style_name:  # (read from the file written: under a staged run its final name comes later)
+                from .io.styles import write_raster_style
 
-            with rasterio.open(out) as ds:  # the style's stretch from a reduced read, not the mosaic
-                k = max(1, int(np.ceil(max(ds.width, ds.height) / 2048)))
-                sample = ds.read(1, out_shape=(max(ds.height // k, 1), max(ds.width // k, 1)))
-            write_raster_style(out, Raster(sample, None, nodata=nodata, style=style_name), style_dirs)
+                with rasterio.open(tmp) as ds:  # the style's stretch from a reduced read, not the mosaic
+                    k = max(1, int(np.ceil(max(ds.width, ds.height) / 2048)))
+                    sample = ds.read(1, out_shape=(max(ds.height // k, 1), max(ds.width // k, 1)))
+                write_raster_style(out, Raster(sample, None, nodata=nodata, style=style_name), style_dirs)
     finally:
         vrt_path.unlink(missing_ok=True)
     return {"width": cols, "height": rows, "cell_size": float(abs(a)), "tiles": len(metas)}
@@ -829,6 +841,30 @@ def _join_pieces(df, rule: LayerMerge):
 # The survey run
 # --------------------------------------------------------------------------------------------
 
+def remove_leftovers(folders) -> int:
+    """Remove the temporary files (``.NAME.*.partial*``) that a run killed mid-write left in its
+    folders (the tiles' folders included); returns how many."""
+    n = 0
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir():
+            continue
+        for p in list(folder.rglob(".*.partial*")):
+            try:
+                if p.is_dir():
+                    import shutil
+
+                    shutil.rmtree(p)
+                else:
+                    p.unlink()
+                n += 1
+            except OSError:
+                pass
+    if n:
+        log.info("removed %d temporary files an earlier, interrupted run left", n)
+    return n
+
+
 def _write_json_atomic(path: Path, data) -> None:
     tmp = path.with_name(f".{path.name}.partial")
     tmp.write_text(json.dumps(data, indent=1, default=str), encoding="utf-8")
@@ -873,11 +909,7 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
     if out.suffix.lower() in (".tif", ".gpkg", ".laz", ".las", ".json"):
         raise UsageError(f"-o {str(out)!r}: a survey run writes into a folder (its outputs and survey.json); give a "
                          "folder")
-    if not out.exists():
-        if not out.parent.exists():
-            raise DataError(f"output folder {str(out.parent)!r} does not exist; create it first")
-        out.mkdir()
-    elif not out.is_dir():
+    if out.exists() and not out.is_dir():
         raise UsageError(f"-o {str(out)!r} is a file; a survey run writes into a folder")
     paths = {}
     for o in wanted:
@@ -888,6 +920,12 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
 
     files = expand_survey_inputs(inputs)
     catalog = build_catalog(files, crs)
+    if not out.exists():  # (once the inputs are known to be readable: a refused run makes nothing)
+        try:
+            out.mkdir(parents=True)
+        except OSError as exc:
+            raise DataError(f"output folder {str(out)!r} cannot be made ({exc.strerror}); choose another location") \
+                from None
     hu = catalog.horizontal_unit_m
     declared = alg.buffer_m(values)
     buffer_used_m = float(buffer_m if buffer_m is not None else (declared or 0.0))
@@ -926,6 +964,7 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         state = {"settings": settings, "tiles": {}, "merged": False}
     state["settings"] = settings
     tile_dir.mkdir(exist_ok=True)
+    remove_leftovers([out, tile_dir, *{paths[o.name] for o in wanted if o.kind == "points"}])
 
     def done_before(t: Tile) -> bool:
         rec = state["tiles"].get(t.name)
@@ -995,15 +1034,22 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
               if r.get("status") == "failed" and n in {t.name for t in tiles}]
     written = {}
     if not failed:
-        written = _merge_outputs(alg, wanted, paths, tiles, state, catalog, reg.style_dirs, overwrite=True)
+        from .io.atomic import staged_outputs
+
+        with staged_outputs() as staging:  # the merged outputs appear together, or none of them
+            written = _merge_outputs(alg, wanted, paths, tiles, state, catalog, reg.style_dirs, overwrite=True)
+            staging.commit()
         state["merged"] = True
         _write_json_atomic(manifest_path, state)
     t_end = time.perf_counter()
     recs = [state["tiles"][t.name] for t in tiles if t.name in state["tiles"]]
     return {
-        "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version, "parameters": values,
+        "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version,
+        # an auto parameter is chosen by each tile (its value is in the tile's stats in the manifest)
+        "parameters": {k: ("auto" if v is None and alg.parameter(k).allow_auto else v) for k, v in values.items()},
         "survey": {"n_files": len(catalog.files), "n_points": catalog.n_points, "bounds": catalog.bounds,
-                   "crs": _crs_name(catalog.crs), "tile_size_m": tile_size_m, "buffer_m": buffer_used_m,
+                   "crs": _crs_name(catalog.crs), "crs_given": crs if crs is None or isinstance(crs, str) else
+                   _crs_name(crs), "tile_size_m": tile_size_m, "buffer_m": buffer_used_m,
                    "buffer_declared_m": declared},
         "n_tiles": len(tiles), "n_done": sum(r.get("status") in ("done", "empty") for r in recs),
         "n_skipped": len(skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),

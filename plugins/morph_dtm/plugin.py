@@ -86,26 +86,30 @@ def _ground_and_noise(pc, params, accel=None):
                                  "refine_cell_m_used": round(gr.surface_grid.cell * hu, 3)}
 
 
-def _check_grid(pc, cell, name):
+def _check_grid(pc, cell, name, caller=""):
     w, s, e, n = pc.bounds()
     cells = ((e - w) / cell + 3) * ((n - s) / cell + 3)
     limit = _max_cells()
     if cells > limit:
-        raise UsageError(f"{name}: a {cell * pc.horizontal_unit_m:g} m grid over {pc.source!r} would have "
-                         f"{cells / 1e6:.0f} million cells, about {cells * BYTES_PER_CELL / 2**30:.0f} GiB "
-                         f"(limit here {limit / 1e6:.0f} million); use a larger {name} or tile the input")
+        size = (f"a {cell * pc.horizontal_unit_m:g} m grid over {pc.source!r} ({(e - w) * pc.horizontal_unit_m:.0f} x "
+                f"{(n - s) * pc.horizontal_unit_m:.0f} m) would have {cells / 1e6:.0f} million cells, about "
+                f"{cells * BYTES_PER_CELL / 2**30:.0f} GiB (limit here {limit / 1e6:.0f} million)")
+        if caller:  # inside another algorithm: this grid is not the user's to set
+            raise UsageError(f"{caller}: its ground step's {size}; run it in tiles (--tile-size-m) or remove the "
+                             "points far from the rest")
+        raise UsageError(f"{name}: {size}; use a larger {name} or run it in tiles (--tile-size-m)")
 
 
-def _check_grids(pc, params):
+def _check_grids(pc, params, caller=""):
     """Refuse grids too big for memory before any work starts."""
     pc.require_points("the ground filter", 10)
-    _check_grid(pc, params["filter_cell_m"] / pc.horizontal_unit_m, "filter_cell_m")
-    _check_grid(pc, params["resolution_m"] / pc.horizontal_unit_m, "resolution_m")
+    _check_grid(pc, params["filter_cell_m"] / pc.horizontal_unit_m, "filter_cell_m", caller)
+    _check_grid(pc, params["resolution_m"] / pc.horizontal_unit_m, "resolution_m", caller)
     refine = params["refine_cell_m"]
     if refine is not None or params["filter_cell_m"] > MIN_AUTO_REFINE_CELL_M:
         # (auto: the smallest it may choose)
         _check_grid(pc, min(refine or MIN_AUTO_REFINE_CELL_M, params["filter_cell_m"]) / pc.horizontal_unit_m,
-                    "refine_cell_m")
+                    "refine_cell_m", caller)
 
 
 def _footprint(grid, x, y, radius_cells):
@@ -204,21 +208,36 @@ def _preview(dtm_raster, pc, ground, noise):
                   description="DTM preview: removed points red, noise blue")
 
 
+# classify assigns ASPRS classes 1-7; the input's classes from 8 on (water 9, wires 14, towers 15,
+# bridge decks 17, 18 and above) are other producers' decisions, which it keeps unless told
+CLASSIFY_ASSIGNS_BELOW = 8
+
+
+def classes_after_ground(pc, ground, noise):
+    """The input's classes with the ground filter's decisions: ground 2, noise 7, a former ground
+    point the filter did not keep 1; every other point keeps its class (1 if the input has none)."""
+    import numpy as np
+
+    given = pc.classification
+    cls = np.ones(len(pc), np.uint8) if given is None else np.asarray(given).astype(np.uint8, copy=True)
+    cls[cls == 2] = 1
+    cls[ground] = 2
+    cls[noise] = 7
+    return cls
+
+
 def _run_dtm(inputs, params, ctx):
     import time
 
     import numpy as np
 
     pc = inputs["points"]
-    _check_grids(pc, params)
+    _check_grids(pc, params, ctx.caller)
     accel = _accel(ctx, len(pc))
     t0 = time.perf_counter()
     ground, noise, filter_stats = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
-    cls = np.ones(len(pc), np.uint8)
-    cls[ground] = 2
-    cls[noise] = 7
-    classified = pc.with_fields(classification=cls)
+    classified = pc.with_fields(classification=classes_after_ground(pc, ground, noise))
     dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
     t2 = time.perf_counter()
     out = {"dtm": dtm, "classified": classified}
@@ -244,9 +263,36 @@ def _run_hillshade(inputs, params, ctx):
     t = dem.transform
     if t.b != 0 or t.d != 0:
         raise DataError(f"input {dem.source!r} is rotated; warp it to a north-up grid first (gdalwarp)")
-    hs = hillshade(dem.bands()[0], t.a, t.e, params["azimuth_deg"], params["altitude_deg"], params["z_factor"],
-                   params["scale"], params["multidirectional"], ~dem.valid_mask(), params["compute_edges"])
-    return {"hillshade": Raster(hs, t, crs=dem.crs, nodata=0, style="hillshade", description="hillshade")}
+    n_bands = dem.bands().shape[0]
+    if n_bands > 1:
+        raise DataError(f"input {dem.source!r} has {n_bands} bands (an RGB image?); hillshade needs a single-band "
+                        "elevation raster: give the DEM, or take its band with gdal_translate -b 1")
+    valid = dem.valid_mask()
+    if not valid.any():
+        raise DataError(f"input {dem.source!r} holds no elevation: every cell is nodata or NaN; check the DEM")
+    ewres, nsres, stats = t.a, t.e, {}
+    if dem.crs is not None and dem.crs.is_geographic and params["scale"] == 1.0:
+        # cells in degrees, heights in metres: each axis in metres at the DEM's middle latitude
+        lat = t.f + t.e * dem.shape[0] / 2
+        m_lon, m_lat = metres_per_degree(lat)
+        ewres, nsres = t.a * m_lon, t.e * m_lat
+        stats = {"metres_per_degree_used": [round(m_lon, 1), round(m_lat, 1)], "latitude_deg": round(lat, 4)}
+        ctx.log.info("%s is in degrees: cells taken as %.1f x %.1f m", dem.source, abs(ewres), abs(nsres))
+    hs = hillshade(dem.bands()[0], ewres, nsres, params["azimuth_deg"], params["altitude_deg"], params["z_factor"],
+                   params["scale"], params["multidirectional"], ~valid, params["compute_edges"])
+    return toolbox.Result({"hillshade": Raster(hs, t, crs=dem.crs, nodata=0, style="hillshade",
+                                               description="hillshade")}, stats=stats)
+
+
+def metres_per_degree(lat_deg: float) -> tuple[float, float]:
+    """Metres per degree of longitude and of latitude on the WGS84 ellipsoid at ``lat_deg`` (the
+    series of the US NGA's geodesy tables, within a millimetre)."""
+    import math
+
+    p = math.radians(lat_deg)
+    m_lat = 111132.92 - 559.82 * math.cos(2 * p) + 1.175 * math.cos(4 * p) - 0.0023 * math.cos(6 * p)
+    m_lon = 111412.84 * math.cos(p) - 93.5 * math.cos(3 * p) + 0.118 * math.cos(5 * p)
+    return m_lon, m_lat
 
 
 def _run_classify(inputs, params, ctx):
@@ -256,9 +302,9 @@ def _run_classify(inputs, params, ctx):
     from .objects import classify_objects
 
     pc = inputs["points"]
-    _check_grids(pc, params)
+    _check_grids(pc, params, ctx.caller)
     accel = _accel(ctx, len(pc))
-    ground, noise, _ = _ground_and_noise(pc, params, accel)
+    ground, noise, filter_stats = _ground_and_noise(pc, params, accel)
     dtm, grid = _dtm_raster(pc, ground, params["resolution_m"], accel)
     surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
     h = pc.z - bilinear(grid, surface, pc.x, pc.y)
@@ -276,9 +322,16 @@ def _run_classify(inputs, params, ctx):
         low_max=2.0 / hu, medium_max=5.0 / hu, min_object_height=0.25 / hu)  # ASPRS height classes in metres
     below = rest & (h < -params["low_outlier_m"] / vu)
     cls[noise | below] = 7
+    n_kept = 0
+    if params["reclassify"] == "own" and pc.classification is not None:
+        given = np.asarray(pc.classification)
+        theirs = given >= CLASSIFY_ASSIGNS_BELOW
+        cls[theirs] = given[theirs]
+        n_kept = int(theirs.sum())
     u, c = np.unique(cls, return_counts=True)
     return toolbox.Result(outputs={"classified": pc.with_fields(classification=cls), "dtm": dtm},
-                          stats={"classes": {int(a): int(b) for a, b in zip(u, c)}})
+                          stats={"classes": {int(a): int(b) for a, b in zip(u, c)}, "n_kept_input_class": n_kept,
+                                 **filter_stats})
 
 
 def ground_buffer_m(p) -> float:
@@ -318,7 +371,8 @@ def toolbox_algorithms():
             inputs=[Input("points", "points", "LAS/LAZ or ASCII point cloud")],
             outputs=[
                 Output("dtm", "raster", "bare-earth DTM", style="dtm"),
-                Output("classified", "points", "the input with classification 2 (ground), 7 (noise), 1 (other)",
+                Output("classified", "points", "the input with ground (2) and noise (7) where the filter says "
+                       "so; a former ground point it does not keep becomes 1, every other point keeps its class",
                        suffix="_classified"),
                 Output("preview", "image", "hillshade with the removed points in red and noise in blue "
                        "(the view to tune parameters with)", optional=True),
@@ -337,7 +391,9 @@ def toolbox_algorithms():
                           minimum=0.0, maximum=90.0),
                 Parameter("z_factor", float, 1.0, "vertical exaggeration", minimum=0.0, exclusive_minimum=True,
                           maximum=1000.0),
-                Parameter("scale", float, 1.0, "ratio of horizontal to vertical units (111120 for degrees and metres)",
+                Parameter("scale", float, 1.0, "ratio of horizontal to vertical units; a DEM in degrees (geographic "
+                          "CRS) with heights in metres is scaled by the metres per degree at its latitude when this "
+                          "is left at 1 (reported as metres_per_degree_used)",
                           minimum=0.0, exclusive_minimum=True, maximum=1e7),
                 Parameter("multidirectional", bool, False, "blend lights from 225, 270, 315 and 360 degrees"),
                 Parameter("compute_edges", bool, True, "shade the border cells too (gdaldem -compute_edges)"),
@@ -352,7 +408,8 @@ def toolbox_algorithms():
                 "large connected planar sets) from vegetation, and the points under a roof edge (facades, "
                 "balconies, eaves) join their building; vegetation clusters are classed low (< 2 m), "
                 "medium (< 5 m) or high by their height above the terrain; points below the terrain are noise. "
-                "ASPRS classes 1, 2, 3, 4, 5, 6, 7."),
+                "Writes ASPRS classes 1-7 on the points whose input class is 0-7; classes 8 and above (water 9, "
+                "wires 14, towers 15, bridge decks 17, 18 and above) are kept unless reclassify=all."),
             reference=REFERENCE,
             # the ground's need, and a building's whole roof (its planar set) seen from either side
             tile_buffer_m=lambda p: max(ground_buffer_m(p), 50.0),
@@ -372,13 +429,17 @@ def toolbox_algorithms():
                           unit="m", minimum=0.0, maximum=500.0),
                 Parameter("link_distance_m", float, 1.5, "points closer than this belong to one set",
                           unit="m", minimum=0.01, maximum=50.0),
+                Parameter("reclassify", str, "own", "own: only points of input classes 0-7 get a new class, "
+                          "the producer's others (water, wires, towers, bridge decks, 18 and above) stay; all: "
+                          "every point gets one of 1-7", choices=("own", "all")),
                 Parameter("wall_reach_m", float, 1.0, "points under a roof edge, within this distance in plan "
                           "of a roof point and at most 0.5 m over it, are its facade (walls, balconies, "
                           "eaves); 0 keeps the method's plane rule alone", unit="m", minimum=0.0, maximum=10.0),
             ],
             inputs=[Input("points", "points", "LAS/LAZ point cloud")],
             outputs=[
-                Output("classified", "points", "the input with ASPRS classes 1-7"),
+                Output("classified", "points", "the input with ASPRS classes 1-7 (classes 8 and above kept, see "
+                       "reclassify)"),
                 Output("dtm", "raster", "the DTM used for heights above ground", style="dtm"),
             ],
         ),

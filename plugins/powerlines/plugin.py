@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import toolbox
-from toolbox import Algorithm, DataError, Input, LayerMerge, Output, Parameter
+from toolbox import Algorithm, Input, LayerMerge, Output, Parameter
 
 # the method's V_max, and how many median point spacings along a wire a gap may span before it
 # ends a run: 2.5 m is about 10 spacings on 10 pts/m2 ALS (and 36 on the method's 228 pts/m2), so
@@ -53,7 +53,9 @@ def _run(inputs, params, ctx):
     timings = {}
     t = time.perf_counter()
     # 1. ground and height above ground, through the DTM algorithm
-    dres = ctx.call("dtm", {"points": pc}, ground=params["ground"], resolution_m=1.0)
+    # the filter's ground and noise alone (the input's own classes would pass through the DTM's output)
+    ground_in = pc if params["ground"] == "file" else pc.with_fields(classification=np.ones(len(pc), np.uint8))
+    dres = ctx.call("dtm", {"points": ground_in}, ground=params["ground"], resolution_m=1.0)
     dtm = dres.outputs["dtm"]
     ground_cls = dres.outputs["classified"].classification
     # height above ground (metres) where it is needed: off-ground points (most points are ground)
@@ -75,9 +77,16 @@ def _run(inputs, params, ctx):
     if params["first_returns_only"] and rn is not None and np.any(rn > 0):
         cand &= rn == 1
     idx = np.flatnonzero(cand)
-    if len(idx) < 10:
-        raise DataError(f"input {pc.source!r}: only {len(idx)} points between {params['height_min_m']} and {h_max:.1f} m "
-                        "above ground; check height_min_m / height_max_m")
+    if len(idx) < 10:  # a field, a road: nothing to find is a result, not an error
+        note = (f"only {len(idx)} points stand {params['height_min_m']:g}-{h_max:.1f} m above the ground: no wire "
+                "can be there (check height_min_m / height_max_m if there is one)")
+        ctx.log.info("powerlines: %s: %s", pc.source, note)
+        return _nothing_found(pc, ground_cls, ctx, note, {
+            "n_points": len(pc), "n_candidates": int(len(idx)), "height_max_m_used": round(float(h_max), 2),
+            "cell_size_m_used": params["cell_size_m"] if params["cell_size_m"] is not None
+            else round(params["band_m"] / 3, 3),
+            "v_max_m_used": V_MAX_METHOD_M if params["v_max_m"] is None else params["v_max_m"],
+            **{k: round(v, 3) for k, v in timings.items()}})
     xyz = np.column_stack([pc.x[idx] * hu, pc.y[idx] * hu, pc.z[idx] * vu])
     # the density of the surfaces around each candidate: first returns per occupied square metre
     # within density_radius_m (roofs and crowns are that dense, wires are not)
@@ -443,8 +452,7 @@ def _run(inputs, params, ctx):
               "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
     if ctx.wants("classified"):
-        cls = np.asarray(ground_cls).copy()
-        cls[cls != 2] = 1
+        cls = _classes_decided(pc, ground_cls)
         cls[tower_pt] = 15
         cls[conductor_of >= 0] = 14
         out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
@@ -465,6 +473,53 @@ def _run(inputs, params, ctx):
              "n_pylons": len(pylons), "n_poles": sum(p.kind == "pole" for p in found), "n_tower_points": int(tower_pt.sum()),
              **{k: round(v, 3) for k, v in timings.items()}}
     return toolbox.Result(out, stats=stats)
+
+
+# the layers' fields, for a run that finds nothing (the same layout as when something is found)
+EMPTY_LAYERS = {
+    "conductors": ("LineString", {"conductor": "int64", "votes": "int64", "n_points": "int64", "length_m": "float64",
+                                  "rms_m": "float64", "azimuth_deg": "float64", "v_max_m": "float64",
+                                  "height_min_m": "float64", "height_max_m": "float64", "n_wires": "int64"}),
+    "conductor_segments": ("LineString", {"conductor": "int64", "segment": "int64", "length_m": "float64"}),
+    "crossings": ("Point", {"n_lines": "int64", "angle_deg": "float64", "conductors": "object"}),
+    "conductors_3d": ("LineString Z", {"conductor": "int64", "wire": "int64", "span": "int64", "sag_m": "float64",
+                                       "catenary_c_m": "float64", "rms_m": "float64", "n_points": "int64",
+                                       "offset_m": "float64", "length_m": "float64"}),
+    "pylons": ("Point Z", {"pylon": "int64", "kind": "object", "height_m": "float64", "n_spans": "int64",
+                           "line_heading_deg": "float64", "n_points": "int64"}),
+}
+
+
+def _classes_decided(pc, ground_cls):
+    """The input's classes with what this run decides, before wires and towers are set: ground 2
+    and noise 7 from its ground step; a former ground, wire or tower point becomes 1 (this run
+    decides those classes); every other point keeps its class."""
+    import numpy as np
+
+    given = pc.classification
+    cls = np.ones(len(pc), np.uint8) if given is None else np.asarray(given).astype(np.uint8, copy=True)
+    cls[np.isin(cls, (2, 14, 15))] = 1
+    cls[np.asarray(ground_cls) == 2] = 2
+    cls[np.asarray(ground_cls) == 7] = 7
+    return cls
+
+
+def _nothing_found(pc, ground_cls, ctx, note, stats):
+    """Empty layers (and the ground's classes) for an input with nothing to find, and the note why."""
+    import geopandas as gpd
+    import numpy as np
+    import pandas as pd
+
+    layers = {}
+    for name, (gtype, fields) in EMPTY_LAYERS.items():
+        gdf = gpd.GeoDataFrame({k: pd.Series([], dtype=t) for k, t in fields.items()},
+                               geometry=gpd.GeoSeries([], crs=pc.crs), crs=pc.crs)
+        gdf.attrs["geometry_type"] = gtype
+        layers[name] = gdf
+    out = {"lines": layers}
+    if ctx.wants("classified"):
+        out["classified"] = pc.with_fields(classification=_classes_decided(pc, ground_cls))
+    return toolbox.Result(out, stats={**stats, "n_conductors": 0, "n_pylons": 0, "n_wire_points": 0, "note": note})
 
 
 def _pylons(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params, also=(), passed_by=None):
@@ -1873,8 +1928,9 @@ def toolbox_algorithms():
         outputs=[
             Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d, pylons",
                    merge=LAYER_MERGE),
-            Output("classified", "points", "the input with the detected wire points as class 14 and tower points "
-                   "as 15", optional=True,
+            Output("classified", "points", "the input with the detected wire points as class 14, tower points "
+                   "as 15, ground 2 and noise 7; a former 2, 14 or 15 not found so becomes 1, every other point "
+                   "keeps its class", optional=True,
                    suffix="_wires"),
         ],
     )]

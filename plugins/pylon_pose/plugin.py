@@ -130,7 +130,7 @@ def _run(inputs, params, ctx):
         seen = np.array([search.seen_by(views, r[:2], ground, height) for r in rough])
         rough = rough[rough[:, 2] >= params["min_vote_share"] * np.maximum(seen, 1)]
         stats.update(model_triangle_side_m=[round(smin, 3), round(smax, 3)],
-                     detector=params["detector"], min_per_photo=per_photo,
+                     detector=params["detector"], min_per_photo=per_photo, min_per_photo_used=per_photo,
                      n_features=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
     found, cand_scores, inconsistent = [], [], []
     for xy in ctx.progress(list(rough), desc="pose search", unit="pylon"):

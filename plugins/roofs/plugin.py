@@ -14,16 +14,29 @@ RAM_SHARE = 0.25  # default accumulator budget: this share of the machine's memo
 
 
 def _buildings(x, y, cell):
-    """Building number per point (1..n): 8-connected groups of occupied ``cell`` cells."""
+    """Building number per point (1..n): 8-connected groups of occupied ``cell`` cells, numbered
+    as a raster scan labels them. Only the occupied cells are held (no grid over the extent: one
+    point kilometres away costs nothing)."""
     import numpy as np
-    from scipy import ndimage
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
 
     c = ((x - x.min()) / cell).astype(np.int64)
     r = ((y - y.min()) / cell).astype(np.int64)
-    grid = np.zeros((r.max() + 1, c.max() + 1), bool)
-    grid[r, c] = True
-    lab, n = ndimage.label(grid, structure=np.ones((3, 3), bool))
-    return lab[r, c], n
+    width = int(c.max()) + 2  # a column of slack: no neighbour key wraps into the next row
+    keys, cell_of = np.unique(r * width + c, return_inverse=True)
+    a, b = [], []
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):  # each pair of 8-neighbours once
+        want = keys + dr * width + dc
+        at = np.minimum(np.searchsorted(keys, want), len(keys) - 1)
+        hit = keys[at] == want
+        a.append(np.flatnonzero(hit))
+        b.append(at[hit])
+    a, b = np.concatenate(a), np.concatenate(b)
+    graph = coo_matrix((np.ones(len(a), np.int8), (a, b)), shape=(len(keys), len(keys)))
+    # components numbered from the lowest key up: the order of a raster scan's first cells
+    n, comp = connected_components(graph, directed=False)
+    return comp[cell_of.ravel()] + 1, n
 
 
 def _roof_points(pc, params, ctx):
@@ -152,11 +165,26 @@ def _run(inputs, params, ctx):
     stats = {"source": source, "n_roof_points": int(len(idx)), "n_buildings": len(groups), "n_planes": next_id - 1,
              "points_on_planes": on_plane, "share_on_planes": round(on_plane / max(len(idx), 1), 4),
              "point_spacing_m": round(spacing * hu, 3) if np.isfinite(spacing) else None,
-             "link_m_used": round(link * hu, 3), "regularised": reg_counts, "accumulator_cells": len(reference.ball_cells(angle)),
+             "link_m_used": round(link * hu, 3), "max_accumulator_mb_used": round(budget / 2**20, 1), "regularised": reg_counts, "accumulator_cells": len(reference.ball_cells(angle)),
              "seconds": round(time.perf_counter() - t0, 3)}
     stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "break", "step")}
     return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},
                           stats=stats)
+
+
+MASK_BYTES_PER_CELL = 16  # the building mask, its labels and the morphology's temporaries
+
+
+def _check_mask_grid(pc, rows: int, cols: int, cell_size_m: float) -> None:
+    """Refuse a building mask too large for memory before it is allocated."""
+    from toolbox.memory import total_ram_bytes
+
+    budget = RAM_SHARE * total_ram_bytes()
+    need = float(rows) * float(cols) * MASK_BYTES_PER_CELL
+    if need > budget:
+        raise UsageError(f"building-edges: the {cell_size_m:g} m mask over the building points of {pc.source!r} "
+                         f"({cols * cell_size_m:.0f} x {rows * cell_size_m:.0f} m) would take {need / 2**30:.1f} GiB, "
+                         f"over {budget / 2**30:.1f} GiB; use a larger cell_size_m or run it in tiles (--tile-size-m)")
 
 
 def _run_edges(inputs, params, ctx):
@@ -206,6 +234,7 @@ def _run_edges(inputs, params, ctx):
                         "the classes")
     x, y = pc.x[idx], pc.y[idx]
     west, north, rows, cols = edges.mask_grid(x, y, cell)
+    _check_mask_grid(pc, rows, cols, params["cell_size_m"])
     mask = edges.clean_mask(edges.rasterise(x, y, west, north, rows, cols, cell))
     if source == "height" and params["erosions"] > 0:
         # the method's erosions take off what is narrower than a building (crowns, hedges); the same

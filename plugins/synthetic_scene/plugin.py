@@ -20,7 +20,7 @@ def _run(inputs, params, ctx):
 
     from .truth import truth_layers, truth_json
 
-    from toolbox.synthetic.scene import DEFAULT_EXTENT
+    from toolbox.synthetic.scene import DEFAULT_EXTENT, DEFAULT_SPAN_M
 
     if params["kind"] == "pylons":
         return _pylons(params, ctx)
@@ -53,7 +53,8 @@ def _run(inputs, params, ctx):
              "density_ppm2_measured": round(len(pc) / (W * H), 3),
              "n_buildings": len(scene.truth["buildings"]), "n_roof_planes": len(scene.truth["roof_planes"]),
              "n_trees": len(scene.truth["trees"]), "n_wires": len(scene.truth["wires"]),
-             "n_pylons": len(scene.truth["pylons"]), "n_crossings": len(scene.truth["crossings"])}
+             "n_pylons": len(scene.truth["pylons"]), "n_crossings": len(scene.truth["crossings"]),
+             "width_m_used": W, "height_m_used": H, "span_m_used": params["span_m"] or DEFAULT_SPAN_M}
     return toolbox.Result(
         outputs={"points": pc, "truth": truth_layers(scene, crs), "truth_json": truth_json(scene), "dtm": dtm,
                  "dem": None, "survey": None},
@@ -78,6 +79,7 @@ def _pylons(params, ctx):
     return toolbox.Result(
         outputs={"points": None, "truth": None, "truth_json": s.truth(), "dtm": None, "dem": dem, "survey": files},
         stats={"kind": "pylons", "seed": s.seed, "n_pylons": len(s.pylons), "n_photos": len(s.shots),
+               "span_m_used": params["span_m"] or 150.0, "width_m_used": None, "height_m_used": None,
                "pylon_types": sorted({p.model for p in s.pylons})})
 
 

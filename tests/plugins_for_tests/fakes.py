@@ -100,7 +100,16 @@ class WrongType:
         return ["not an algorithm"]
 
 
+class ExitsInHook:
+    @toolbox.hookimpl
+    def toolbox_algorithms(self):
+        import sys
+
+        sys.exit(4)
+
+
 good = Good()
+exits_in_hook = ExitsInHook()
 emitting = Emitting()
 clash = Clash()
 raises = Raises()

@@ -254,6 +254,13 @@ def crs_units(crs) -> tuple[float, float | None]:
             f"CRS {crs.name!r} is geographic (degrees); reproject the points to a projected CRS "
             "(e.g. UTM) or pass --crs with the projected CRS they are really in"
         )
+    if not (horiz.is_projected or horiz.is_engineering):
+        # geocentric (EPSG:4978) or vertical only: no plan axes in metres or feet to work in
+        kind = "geocentric (earth-centred X, Y, Z)" if horiz.is_geocentric else "not a projected CRS"
+        raise DataError(
+            f"CRS {crs.name!r} is {kind}; reproject the points to a projected CRS (e.g. UTM) or pass --crs "
+            "with the projected CRS they are really in"
+        )
     h = 1.0
     if horiz.axis_info:
         h = float(horiz.axis_info[0].unit_conversion_factor or 1.0)
@@ -307,6 +314,34 @@ def _check_exists(path: Path) -> None:
         raise UsageError(f"input {str(path)!r} is a folder; give the point cloud files in it")
 
 
+def check_las_header(hdr, path) -> None:
+    """Refuse a header whose scales or offsets are zero, NaN or infinite: every coordinate read
+    through it would be wrong (all at the offset, or NaN), and nothing in the points says so."""
+    where = str(path)
+    for what, values in (("scale factors", hdr.scales), ("offsets", hdr.offsets)):
+        v = np.asarray(values, dtype=np.float64)
+        bad = ~np.isfinite(v) | ((v == 0) if what == "scale factors" else np.zeros(len(v), bool))
+        if bad.any():
+            shown = ", ".join(f"{a}={b:g}" for a, b in zip("xyz", v))
+            raise DataError(f"input {where!r}: the LAS header's {what} are {shown}; no coordinate can be read "
+                            "through them: repair the header (e.g. las2las -rescale / -reoffset) or re-export the file")
+
+
+def drop_non_finite(pc: PointCloud, refuse_when_none_left: bool = True) -> PointCloud:
+    """The cloud without points whose x, y or z is NaN or infinite, with a warning that counts them;
+    the count is kept in ``pc.meta['n_dropped_non_finite']`` for the run report."""
+    ok = np.isfinite(pc.x) & np.isfinite(pc.y) & np.isfinite(pc.z)
+    n_bad = int(len(ok) - np.count_nonzero(ok))
+    if n_bad == 0:
+        return pc
+    if n_bad == len(ok) and refuse_when_none_left:
+        raise DataError(f"input {pc.source!r}: none of its {n_bad} points has finite x, y and z; check the file")
+    log.warning("%s: %d of %d points have a NaN or infinite x, y or z; they were dropped", pc.source, n_bad, len(ok))
+    out = pc.subset(ok)
+    out.meta["n_dropped_non_finite"] = n_bad
+    return out
+
+
 def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
     """Read a LAS/LAZ or ASCII point cloud. ``crs`` (text or pyproj CRS) sets or overrides the CRS.
 
@@ -317,7 +352,8 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
     _check_exists(path)
     user_crs = parse_crs(crs) if isinstance(crs, str) else crs
     if point_format_of(path) == "ascii":
-        pc = _read_ascii(path)
+        pc = drop_non_finite(_read_ascii(path))
+        _warn_without_crs(path, user_crs, len(pc))
         return _apply_crs(pc, user_crs)
     selection = None
     if dims is not None and path.suffix.lower() == ".laz":
@@ -331,6 +367,7 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
                 selection = None
     las = _read_las_data(path, selection)
     hdr = las.header
+    check_las_header(hdr, path)
     names = [n for n in las.point_format.dimension_names if n not in ("X", "Y", "Z")]
     if selection is None:
         fields = LazyFields(las.points, names)
@@ -348,10 +385,15 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
         fields=fields, source=str(path), header=hdr,
     )
     pc.meta["_xyz_source"] = (pc.x, pc.y, pc.z, las.points)
+    pc = drop_non_finite(pc)
     crs_final = user_crs if user_crs is not None else file_crs
-    if crs_final is None:
-        log.info("%s has no CRS; outputs will have none (pass --crs EPSG:nnnn to set it)", path)
+    _warn_without_crs(path, crs_final, len(pc))
     return _apply_crs(pc, crs_final, hdr)
+
+
+def _warn_without_crs(path, crs, n_points: int) -> None:
+    if crs is None and n_points:  # (an empty cloud is refused anyway: one line is enough)
+        log.warning("%s has no CRS; its outputs will have none: pass --crs (e.g. --crs EPSG:28992) to set it", path)
 
 
 def _decode_errors() -> tuple:
@@ -407,6 +449,7 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
         raise DataError(f"input {str(path)!r} is not a readable LAS/LAZ file ({_short(str(exc))})") from None
     with reader:
         hdr = reader.header
+        check_las_header(hdr, path)
         crs_final = user_crs if user_crs is not None else _safe_parse_crs(hdr)
         seen = 0
         try:
@@ -417,7 +460,7 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
                     x=np.asarray(chunk.x), y=np.asarray(chunk.y), z=np.asarray(chunk.z),
                     fields=fields, source=str(path), header=hdr,
                 )
-                yield _apply_crs(pc, crs_final, hdr)
+                yield _apply_crs(drop_non_finite(pc, refuse_when_none_left=False), crs_final, hdr)
         except _decode_errors() as exc:
             raise DataError(f"input {str(path)!r} is truncated or corrupt after {seen} points ({_short(str(exc))})") from None
         if seen != hdr.point_count:
@@ -464,18 +507,33 @@ def _read_ascii(path: Path) -> PointCloud:
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
             data = np.loadtxt(path, delimiter=delim, comments="#", ndmin=2, dtype=np.float64)
     except ValueError as exc:
-        raise DataError(f"input {str(path)!r} is not an ASCII 'X Y Z [label]' file ({_short(str(exc))})") from None
+        hint = ""
+        if first and not _numbers_only(first, delim):
+            hint = f"; its first line {first.strip()[:40]!r} looks like a header row: remove it or start it with '#'"
+        raise DataError(f"input {str(path)!r} is not an ASCII 'X Y Z [label]' file ({_short(str(exc))}){hint}") from None
     if data.size == 0:
         return PointCloud(x=np.empty(0), y=np.empty(0), z=np.empty(0), source=str(path))
     if data.shape[1] < 3:
         raise DataError(f"input {str(path)!r} has {data.shape[1]} columns; an ASCII point file needs X Y Z [label]")
     fields: dict[str, np.ndarray] = {}
     if data.shape[1] == 4:
-        fields["label"] = data[:, 3].astype(np.int32)  # ISPRS filter test: 0 bare earth, 1 object
+        # a label that is not a number cannot be kept as one: its point goes with the non-finite ones
+        bad_label = ~np.isfinite(data[:, 3])
+        data[bad_label, 2] = np.nan
+        fields["label"] = np.nan_to_num(data[:, 3]).astype(np.int32)  # ISPRS filter test: 0 bare earth, 1 object
     else:
         for j in range(3, data.shape[1]):
             fields[f"column_{j + 1}"] = data[:, j]
     return PointCloud(x=data[:, 0], y=data[:, 1], z=data[:, 2], fields=fields, source=str(path))
+
+
+def _numbers_only(line: str, delim) -> bool:
+    for token in (line.split(delim) if delim else line.split()):
+        try:
+            float(token)
+        except ValueError:
+            return False
+    return True
 
 
 def _short(msg: str) -> str:
@@ -497,6 +555,12 @@ def write_points(pc: PointCloud, path: str | os.PathLike, overwrite: bool = Fals
     path = Path(path)
     if path.suffix.lower() not in LAS_EXTENSIONS:
         raise UsageError(f"output {str(path)!r}: points are written as .las or .laz")
+    src = pc.meta.get("_xyz_source")
+    if src is None or not _xyz_untouched(pc, src):  # coordinates decoded from a file are finite
+        n_bad = len(pc) - int(np.count_nonzero(np.isfinite(pc.x) & np.isfinite(pc.y) & np.isfinite(pc.z)))
+        if n_bad:
+            raise DataError(f"output {str(path)!r}: {n_bad} of {len(pc)} points have a NaN or infinite coordinate; "
+                            "nothing was written (the algorithm that made them has a bug: please report it)")
     with RECORD_LOCK:
         return _write_points_locked(pc, path, overwrite)
 

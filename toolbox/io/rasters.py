@@ -4,6 +4,7 @@ overviews) with a QGIS ``.qml`` sidecar so that QGIS opens them styled."""
 from __future__ import annotations
 
 import os
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -133,7 +134,7 @@ def write_raster(r: Raster, path: str | os.PathLike, style_dirs=(), overwrite: b
     if r.style:
         from .styles import write_raster_style
 
-        write_raster_style(path, r, style_dirs, overwrite=True)
+        write_raster_style(path, r, style_dirs, overwrite=overwrite)
     return path
 
 
@@ -167,16 +168,27 @@ def write_image(image, path: str | os.PathLike, overwrite: bool = False) -> Path
                 ds.write(bands)
         # GDAL names the sidecars after the temporary file: they move in with the picture (and a
         # picture written without them must not pick up stale ones of an earlier run)
+        from .atomic import current_staging
+
+        staging = current_staging()
         moved = []
         try:
             for ext, final in sidecars.items():
                 made = tmp.with_suffix(ext) if ext == ".wld" else tmp.with_name(tmp.name + ".aux.xml")
                 if geo is not None and made.exists():
-                    os.replace(made, final)
-                    moved.append(final)
+                    if staging is not None:  # renamed with the run's other files
+                        staged = made.with_name(f".{final.name}.{uuid.uuid4().hex[:8]}.partial")
+                        os.replace(made, staged)
+                        staging.add(staged, final)
+                    else:
+                        os.replace(made, final)
+                        moved.append(final)
                 else:
                     made.unlink(missing_ok=True)
-                    final.unlink(missing_ok=True)
+                    if staging is not None:
+                        staging.remove_on_commit(final)
+                    else:
+                        final.unlink(missing_ok=True)
         except BaseException:
             for f in moved:
                 f.unlink(missing_ok=True)

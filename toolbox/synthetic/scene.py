@@ -27,6 +27,7 @@ from .terrain import Terrain, _line_frame
 KINDS = ("corridor", "terrain", "roofs")
 ROOF_SETS = ("basic", "all")  # all (kind=roofs): also pyramid, shed, mansard, gambrel, L, T and cross-shaped
 # buildings, and trees whose crowns reach over some eaves
+DEFAULT_SPAN_M = 185.0  # the distance between towers of the double-circuit and stacked lines
 DEFAULT_EXTENT = {"corridor": (600.0, 250.0), "terrain": (400.0, 300.0), "roofs": (160.0, 120.0)}
 
 # ASPRS classes used here
@@ -381,7 +382,7 @@ def _power_lines(kind, W, H, rng, terrain, bundle: int = 2, bundle_spacing_m: fl
     ang_a = np.radians(rng.uniform(3, 8))
     a0 = np.array([-40.0, 0.42 * H - 0.5 * W * np.tan(ang_a)])
     dir_a = np.array([np.cos(ang_a), np.sin(ang_a)])
-    span = 185.0 if span_m is None else float(span_m)
+    span = DEFAULT_SPAN_M if span_m is None else float(span_m)
     towers = [a0 + dir_a * (60.0 + k * span) for k in range(int((W + 200.0) / span) + 2)]
     towers = [t for t in towers if -20 < t[0] < W + 20]
     model = lattice_tower(height_m=38.0, arms=((21.0, 6.0), (26.0, 6.0), (31.0, 6.0)), earth_z=38.0) \
