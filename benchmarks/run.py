@@ -1050,6 +1050,12 @@ def main(argv=None) -> int:
             rows += bench_ground(tmp, not args.no_10m, args.quick)
         if "isprs" in want:
             rows += bench_isprs(tmp)
+            if not args.quick:  # leave-one-site-out: every looked-at constant chosen again without the site
+                from isprs_loso import report as loso_report
+
+                loso = loso_report()
+                if loso:
+                    rows.append({"case": "isprs loso", **loso})
         if "hillshade" in want:
             rows += bench_hillshade(tmp)
         if "hough" in want:

@@ -363,7 +363,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
                   slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True,
                   accel=None, jump=None, min_terrace_cells: int = 1, raised_share: float = 0.5,
                   refill_gaps: bool = True, refine_cell: float | None = None,
-                  min_refine_cell: float = 0.0) -> GroundResult:
+                  min_refine_cell: float = 0.0, refine_per_spacing: float = 1.25) -> GroundResult:
     """Label ground points (all lengths in the cloud's units).
 
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
@@ -379,7 +379,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
        (steep cells tolerate more, as a cell's points spread over its height range).
     4. With ``refine``: a surface fitted to those ground points (a plane per 3x3 cells) replaces
        it and the test is repeated, first on the filter grid, then on a grid of ``refine_cell``
-       (None: ``refine_cell_size`` of the measured point spacing, at least ``min_refine_cell``);
+       (None: ``refine_per_spacing`` x the measured point spacing, at least ``min_refine_cell``);
        where that grid is at most half the filter cell, on it alone.
 
     ``accel`` (optional) provides ``minimum_surface``, ``moments`` and ``near_surface`` doing the
@@ -429,7 +429,8 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     ground &= ~noise
     surface, surface_grid = provisional, grid
     if refine:
-        fine_cell = refine_cell if refine_cell is not None else refine_cell_size(spacing, cell, min_refine_cell)
+        fine_cell = refine_cell if refine_cell is not None else refine_cell_size(spacing, cell, min_refine_cell,
+                                                                                 refine_per_spacing)
         fine = grid if fine_cell == cell else Grid.around(x, y, fine_cell)
         # the surface fitted to the ground points (a plane per cell) follows the terrain between
         # cell minima; once more on a grid matched to the point spacing, which follows breaklines.
