@@ -32,7 +32,9 @@ GRID = {
     "refill_gaps": (True, False),  # rule: gaps filled again from the ground, opening repeated
     "refine": ("fine", "filter", "none"),  # planes per 3x3 cells: filter grid then the spacing grid / filter only / off
     "refine_per_spacing": (1.25, 1.0, 2.0),  # the spacing grid's cell, x the point spacing
-    "slope_k": (0.08, 0.05, 0.12, 0.18),
+    # k fixed, or (a string "xF") F x the terrain's slope: an opening of width w lowers a plane of
+    # slope s by s w / 2, so k = s / 2 ("x0.5") is what a sloping ground needs (see terrain_slope_p90)
+    "slope_k": (0.08, 0.05, 0.12, 0.18, "x0.25", "x0.5", "x1.0"),
     "min_height_n_m": (0.45, 0.3, 0.6, 0.9),
     "ground_threshold_m": (0.25, 0.15, 0.4),
 }
@@ -42,6 +44,7 @@ STEPS = {"jump_m": "sets not raised kept as ground (jump_m)", "refill_gaps": "ga
          "refine": "plane refinement (filter grid, then the spacing grid)",
          "cell_per_spacing": "filter cell from the point spacing"}
 OFF = {**PUBLISHED, "cell_per_spacing": None}  # each step's 'off' value
+FIXED_K = (0.08, 0.05, 0.12, 0.18)  # the slope_k values that are not derived (for the ablation of the derived k)
 FIXED = {"filter_cell_m": 2.0, "max_filter_size_m": 50.0, "slope_factor": 1.0, "low_outlier_m": 2.0,
          "min_terrace_m2": 40.0}
 MIN_GAIN_POINTS = 0.1  # a step that gains less than this in the LOSO mean goes (#80)
@@ -74,6 +77,31 @@ def _cloud(sample: str):
     return _CLOUDS[sample]
 
 
+_SLOPES: dict = {}
+
+
+def terrain_slope_p90(sample: str, cell: float) -> float:
+    """The 90th percentile of the slope (m/m) of the surface that the largest opening
+    (max_filter_size_m) leaves of the lowest points per cell: the terrain with every object
+    narrower than the window removed."""
+    from scipy import ndimage
+
+    from toolbox_plugins.morph_dtm.core import Grid, fill_holes, footprint, minimum_surface, surface_slope
+
+    key = (sample, round(cell, 3))
+    if key not in _SLOPES:
+        pc = _cloud(sample)[0]
+        grid = Grid.around(pc.x, pc.y, cell)
+        zmin, _ = minimum_surface(grid, pc.x, pc.y, pc.z)
+        occupied = np.isfinite(zmin)
+        domain = footprint(occupied, 3)
+        filled = fill_holes(zmin, occupied, domain)
+        w = max(3, int(np.ceil(FIXED["max_filter_size_m"] / cell)) | 1)
+        opened = ndimage.grey_opening(filled, size=(w, w), mode="nearest")
+        _SLOPES[key] = float(np.percentile(surface_slope(opened, cell)[domain], 90))
+    return _SLOPES[key]
+
+
 def _error(job) -> float:
     """Total error (%) of the filter on one sample with one combination of the grid."""
     from toolbox_plugins.morph_dtm.core import ground_filter
@@ -83,9 +111,12 @@ def _error(job) -> float:
     c = dict(key)
     pc, truth, spacing = _cloud(sample)
     cell = FIXED["filter_cell_m"] if c["cell_per_spacing"] is None else c["cell_per_spacing"] * spacing
+    k = c["slope_k"]
+    if isinstance(k, str):
+        k = float(k[1:]) * terrain_slope_p90(sample, cell)
     refine = c["refine"]
     gr = ground_filter(
-        pc.x, pc.y, pc.z, cell=cell, max_size=FIXED["max_filter_size_m"], k=c["slope_k"],
+        pc.x, pc.y, pc.z, cell=cell, max_size=FIXED["max_filter_size_m"], k=k,
         n=c["min_height_n_m"], ground_threshold=c["ground_threshold_m"], slope_factor=FIXED["slope_factor"],
         low_outlier=FIXED["low_outlier_m"], jump=c["jump_m"] or None, refine=refine != "none",
         min_terrace_cells=max(1, int(np.ceil(FIXED["min_terrace_m2"] / cell ** 2))),
@@ -118,21 +149,28 @@ class Scores:
         return np.array([self.cache[(s, self.key(c))] for s in samples])
 
 
-def factorial(fixed: dict) -> list[dict]:
+def _values(name: str, restrict: dict) -> tuple:
+    return tuple(v for v in GRID[name] if v in restrict.get(name, GRID[name]))
+
+
+def factorial(fixed: dict, restrict: dict) -> list[dict]:
     names = [n for n in FACTORIAL if n not in fixed]
-    return [{**DEFAULT, **fixed, **dict(zip(names, vals))} for vals in itertools.product(*(GRID[n] for n in names))]
+    start = {**DEFAULT, **fixed, **{n: _values(n, restrict)[0] for n in restrict}}
+    return [{**start, **dict(zip(names, vals))} for vals in itertools.product(*(_values(n, restrict) for n in names))]
 
 
-def descend(scores: Scores, train, fixed: dict | None = None) -> dict:
+def descend(scores: Scores, train, fixed: dict | None = None, restrict: dict | None = None) -> dict:
     """The best of the FACTORIAL choices on the mean error of ``train``, then coordinate descent
-    over the whole grid from there; ``fixed`` holds values forced (a step switched off)."""
-    fixed = fixed or {}
-    cands = factorial(fixed)
+    over the whole grid from there; ``fixed`` holds values forced (a step switched off),
+    ``restrict`` the values a name may take."""
+    fixed, restrict = fixed or {}, restrict or {}
+    cands = factorial(fixed, restrict)
     scores.ensure(cands)
     current = cands[int(np.argmin([scores.of(c, train).mean() for c in cands]))]
     for _ in range(SWEEPS):
         moved = False
-        for name, values in GRID.items():
+        for name in GRID:
+            values = _values(name, restrict)
             if name in fixed:
                 continue
             cands = [dict(current, **{name: v}) for v in values]
@@ -146,7 +184,7 @@ def descend(scores: Scores, train, fixed: dict | None = None) -> dict:
     return current
 
 
-def loso(scores: Scores, samples, fixed: dict | None = None) -> tuple[np.ndarray, dict]:
+def loso(scores: Scores, samples, fixed: dict | None = None, restrict: dict | None = None) -> tuple[np.ndarray, dict]:
     """Each sample's error under the combination chosen on the other sites."""
     sites = np.array([site_of(s) for s in samples])
     held = np.full(len(samples), np.nan)
@@ -154,7 +192,7 @@ def loso(scores: Scores, samples, fixed: dict | None = None) -> tuple[np.ndarray
     for site in sorted(set(sites)):
         train = [s for s, t in zip(samples, sites) if t != site]
         test = [s for s, t in zip(samples, sites) if t == site]
-        c = descend(scores, train, fixed)
+        c = descend(scores, train, fixed, restrict)
         chosen[site] = c
         held[sites == site] = scores.of(c, test)
     return held, chosen
@@ -221,6 +259,11 @@ def report(samples=None) -> dict:
         verdict = "keeps its place" if gain >= MIN_GAIN_POINTS else f"gains under {MIN_GAIN_POINTS}: goes"
         print(f"  {label:<55} LOSO mean {held.mean():.2f} % with, {held_off.mean():.2f} % without: "
               f"gain {gain:+.2f} points ({verdict})")
+    held_fixed_k, _ = loso(scores, samples, restrict={"slope_k": FIXED_K})
+    gain = float(held_fixed_k.mean() - held.mean())
+    ablation["derived_slope_k"] = round(gain, 3)
+    print(f"  {'k from the terrain slope (xF)':<55} LOSO mean {held.mean():.2f} % with, {held_fixed_k.mean():.2f} % "
+          f"without: gain {gain:+.2f} points")
     held_pub, _ = loso(scores, samples, fixed=dict(OFF))
     print(f"  the method as published (those steps off, the constants chosen): LOSO mean {held_pub.mean():.2f} %")
     scores.pool.shutdown()
