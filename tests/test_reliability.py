@@ -183,6 +183,24 @@ def test_classify_keeps_water_wires_and_towers_unless_told(ahn4_crop, tmp_path):
     assert "classes 8 and above" in r.stdout and "reclassify" in r.stdout
 
 
+def test_powerlines_keeps_the_classes_it_does_not_decide(ahn4_crop, tmp_path):
+    import laspy
+
+    before = np.asarray(laspy.read(ahn4_crop).classification)
+    r = run_cli("run", "powerlines", ahn4_crop, "-o", tmp_path / "p.gpkg", "--crs", "EPSG:28992", "-q",
+                "--output-path", f"classified={tmp_path / 'w.laz'}")
+    assert r.returncode == 0, r.stderr
+    after = np.asarray(laspy.read(tmp_path / "w.laz").classification)
+    water = before == 9
+    assert water.sum() > 100 and np.all(after[water] == 9)  # (before: water became ground or 1)
+    wires = before == 14
+    assert (after[wires] == 14).mean() > 0.95  # the wires are found, and written as 14
+    undecided = ~np.isin(after, (2, 7, 14, 15))  # the crop's synthetic 5 and 26 too: not this run's to change
+    expected = np.where(np.isin(before, (2, 14, 15)), 1, before)
+    assert np.array_equal(after[undecided], expected[undecided])
+    assert {5, 26} <= set(np.unique(after).tolist())
+
+
 # --- 4. CRS ------------------------------------------------------------------------------------------
 
 def test_a_file_without_crs_is_warned_about_by_default(tmp_path):

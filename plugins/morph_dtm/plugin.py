@@ -213,19 +213,6 @@ def _preview(dtm_raster, pc, ground, noise):
 CLASSIFY_ASSIGNS_BELOW = 8
 
 
-def classes_after_ground(pc, ground, noise):
-    """The input's classes with the ground filter's decisions: ground 2, noise 7, a former ground
-    point the filter did not keep 1; every other point keeps its class (1 if the input has none)."""
-    import numpy as np
-
-    given = pc.classification
-    cls = np.ones(len(pc), np.uint8) if given is None else np.asarray(given).astype(np.uint8, copy=True)
-    cls[cls == 2] = 1
-    cls[ground] = 2
-    cls[noise] = 7
-    return cls
-
-
 def _run_dtm(inputs, params, ctx):
     import time
 
@@ -237,7 +224,8 @@ def _run_dtm(inputs, params, ctx):
     t0 = time.perf_counter()
     ground, noise, filter_stats = _ground_and_noise(pc, params, accel)
     t1 = time.perf_counter()
-    classified = pc.with_fields(classification=classes_after_ground(pc, ground, noise))
+    # ground 2 and noise 7 where the filter says so; a former 2 it does not keep is 1
+    classified = pc.with_fields(classification=pc.classes_with([(2, ground), (7, noise)], released=(2,)))
     dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
     t2 = time.perf_counter()
     out = {"dtm": dtm, "classified": classified}

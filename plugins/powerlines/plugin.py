@@ -452,10 +452,8 @@ def _run(inputs, params, ctx):
               "crossings": crossings, "conductors_3d": c3d, "pylons": pylons}
     out = {"lines": layers}
     if ctx.wants("classified"):
-        cls = _classes_decided(pc, ground_cls)
-        cls[tower_pt] = 15
-        cls[conductor_of >= 0] = 14
-        out["classified"] = pc.with_fields(classification=cls.astype(np.uint8))
+        out["classified"] = pc.with_fields(classification=_classes_decided(pc, ground_cls, tower_pt,
+                                                                           conductor_of >= 0))
     if (len(cond) == 0 or params["cell_size_m"] is not None) and linear.sum() >= 200 and n_th < 0.15 * linear.sum():
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
         # opening keeps, and the top-hat throws the wires away
@@ -490,18 +488,19 @@ EMPTY_LAYERS = {
 }
 
 
-def _classes_decided(pc, ground_cls):
-    """The input's classes with what this run decides, before wires and towers are set: ground 2
-    and noise 7 from its ground step; a former ground, wire or tower point becomes 1 (this run
-    decides those classes); every other point keeps its class."""
+def _classes_decided(pc, ground_cls, tower=None, wire=None):
+    """The input's classes with what this run decides: wires 14 and towers 15 (a former 14 or 15
+    it does not find becomes 1), and its ground step's ground 2 and noise 7 on the points whose
+    input class a ground filter decides (below 8: water, bridge decks, 18 and above stay)."""
     import numpy as np
 
     given = pc.classification
-    cls = np.ones(len(pc), np.uint8) if given is None else np.asarray(given).astype(np.uint8, copy=True)
-    cls[np.isin(cls, (2, 14, 15))] = 1
-    cls[np.asarray(ground_cls) == 2] = 2
-    cls[np.asarray(ground_cls) == 7] = 7
-    return cls
+    filterable = np.ones(len(pc), bool) if given is None else np.asarray(given) < 8
+    g = np.asarray(ground_cls)
+    decided = [(2, filterable & (g == 2)), (7, filterable & (g == 7))]
+    decided += [(15, tower)] if tower is not None else []
+    decided += [(14, wire)] if wire is not None else []
+    return pc.classes_with(decided, released=(2, 14, 15))
 
 
 def _nothing_found(pc, ground_cls, ctx, note, stats):
@@ -1929,8 +1928,8 @@ def toolbox_algorithms():
             Output("lines", "vector", "layers conductors, conductor_segments, crossings, conductors_3d, pylons",
                    merge=LAYER_MERGE),
             Output("classified", "points", "the input with the detected wire points as class 14, tower points "
-                   "as 15, ground 2 and noise 7; a former 2, 14 or 15 not found so becomes 1, every other point "
-                   "keeps its class", optional=True,
+                   "as 15, and ground 2 and noise 7 among points of input classes 0-7; a former 2, 14 or 15 not "
+                   "found so becomes 1, every other point keeps its class", optional=True,
                    suffix="_wires"),
         ],
     )]

@@ -218,6 +218,19 @@ class PointCloud:
         """Convert a length in metres to this cloud's (horizontal or vertical) units."""
         return metres / (self.vertical_unit_m if vertical else self.horizontal_unit_m)
 
+    def classes_with(self, decided, released=()) -> np.ndarray:
+        """The input's classification (1 where the cloud has none) with a run's decisions:
+        ``decided`` is [(class, mask)], applied in order; a point whose input class is one of
+        ``released`` (classes the run decides for the whole cloud) and that no decision takes
+        becomes 1 (unclassified). Every other point keeps its class."""
+        given = self.classification
+        cls = np.ones(len(self), np.uint8) if given is None else np.asarray(given).astype(np.uint8, copy=True)
+        if released:
+            cls[np.isin(cls, released)] = 1
+        for value, mask in decided:
+            cls[mask] = value
+        return cls
+
     def require_points(self, what: str = "this algorithm", minimum: int = 1) -> None:
         if len(self) < minimum:
             raise DataError(
