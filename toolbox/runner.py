@@ -183,7 +183,7 @@ def plan_outputs(alg: Algorithm, output: str | os.PathLike, named: Mapping[str, 
     out = Path(output)
     primary = alg.outputs[0]
     is_dir = out.is_dir() or str(output).endswith(os.sep) or not out.suffix
-    if is_dir:  # a missing folder is made by the run (see prepare_folder)
+    if is_dir:  # a missing folder is made by the run (see check_outputs)
         base = out / (stem or primary.name)
         primary_path = base.with_name(base.name + primary.extension)
     else:
@@ -216,6 +216,34 @@ def sidecars_of(output, path: Path, style_dirs) -> list[Path]:
     return []
 
 
+def files_of(alg: Algorithm, paths: Mapping[str, Path], style_dirs) -> list[Path]:
+    """Every file the outputs at ``paths`` write: each output's and its sidecars (folder outputs,
+    whose files are their own, left out)."""
+    by_name = {o.name: o for o in alg.outputs}
+    files = []
+    for name, p in paths.items():
+        if by_name[name].kind != "folder":
+            files += [Path(p), *sidecars_of(by_name[name], Path(p), style_dirs)]
+    return files
+
+
+def check_outputs(alg: Algorithm, paths: Mapping[str, Path], input_files, overwrite: bool, style_dirs,
+                  staging) -> None:
+    """Before any work: no file of the outputs is an input, each may be written (``--overwrite``
+    for one that exists), and the folders they go into exist (made when missing)."""
+    from .io.atomic import check_folder, check_writable
+
+    files = files_of(alg, paths, style_dirs)
+    check_not_inputs(files, input_files)
+    kinds = {o.name: o.kind for o in alg.outputs}
+    for name, p in paths.items():
+        staging.make_dirs(p if kinds[name] == "folder" else Path(p).parent)  # removed again if the run fails
+        if kinds[name] == "folder":
+            check_folder(p)
+    for p in files:
+        check_writable(p, overwrite)
+
+
 def _same_file(a: Path, b: Path) -> bool:
     try:
         if a.exists() and b.exists():
@@ -225,9 +253,9 @@ def _same_file(a: Path, b: Path) -> bool:
     return os.path.realpath(a) == os.path.realpath(b)
 
 
-def check_not_inputs(paths: Mapping[str, Path], input_files: Sequence[str]) -> None:
+def check_not_inputs(paths: Sequence[Path], input_files: Sequence[str]) -> None:
     """Refuse any output (or sidecar) that is one of the inputs, whatever --overwrite says."""
-    for name, p in paths.items():
+    for p in paths:
         for f in input_files:
             if _same_file(Path(p), Path(f)):
                 raise UsageError(f"output {str(p)!r} is the input {str(f)!r}; the toolbox never replaces an input: "
@@ -239,24 +267,6 @@ def _input_files(assigned: Mapping[str, Any]) -> list[str]:
     for v in assigned.values():
         files.extend(str(x) for x in (v if isinstance(v, list) else [v]) if isinstance(x, (str, os.PathLike)))
     return files
-
-
-def prepare_folder(folder: Path, staging) -> None:
-    """Make the folder an output goes into when it is missing (removed again if the run fails)."""
-    folder = Path(folder) if str(folder) else Path(".")
-    p = folder
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    if p.exists() and not p.is_dir():
-        where = f"output folder {str(folder)!r}" + ("" if p == folder else f" cannot be made: {str(p)!r}")
-        raise DataError(f"{where} is a file, not a folder; choose another output location")
-    if folder.exists():
-        return
-    try:
-        staging.make_dirs(folder)
-    except OSError as exc:
-        raise DataError(f"output folder {str(folder)!r} cannot be made ({exc.strerror}); choose another output "
-                        "location") from None
 
 
 def parameters_used(alg: Algorithm, values: Mapping[str, Any], stats: Mapping[str, Any]) -> tuple[dict, list]:
@@ -515,23 +525,7 @@ def _run_staged(algorithm_id, inputs, output, params, outputs, overwrite, crs, r
     optional = {o.name for o in alg.outputs if o.optional}
     requested = frozenset(n for n in (outputs or {}) if n in optional)
     paths = {n: p for n, p in paths.items() if n not in optional or n in requested}
-    from .io.atomic import check_folder, check_writable
-
-    kinds = {o.name: o.kind for o in alg.outputs}
-    by_name = {o.name: o for o in alg.outputs}
-    every_file = {}
-    for name, p in paths.items():
-        if kinds[name] != "folder":
-            every_file[name] = p
-            for i, side in enumerate(sidecars_of(by_name[name], Path(p), reg.style_dirs)):
-                every_file[f"{name} sidecar {i}"] = side
-    check_not_inputs(every_file, _input_files(assigned))
-    for name, p in paths.items():
-        prepare_folder(p if kinds[name] == "folder" else Path(p).parent, staging)
-        if kinds[name] == "folder":
-            check_folder(p)
-    for p in every_file.values():
-        check_writable(p, overwrite)
+    check_outputs(alg, paths, _input_files(assigned), overwrite, reg.style_dirs, staging)
 
     specs = {s.name: s for s in alg.inputs}
     # a run that writes points writes every dimension: read them all; otherwise only the declared
@@ -673,12 +667,9 @@ def run_batch(algorithm_id: str, files: Sequence[str], outdir: str, params: Mapp
     if out.exists() and not out.is_dir():
         raise UsageError(f"a batch of {len(files)} files writes into a folder; {outdir!r} is a file")
     _check_batch_outputs(alg, files, out, reg)
-    created = not out.exists()
-    if created:
-        try:
-            out.mkdir(parents=True)
-        except OSError as exc:
-            raise DataError(f"output folder {outdir!r} cannot be made ({exc.strerror}); choose another location") from None
+    from .io.atomic import make_folder
+
+    created = make_folder(out)
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(files)))
     arch = kernels.requested_arch()
     tasks = [(algorithm_id, f, str(out), dict(params or {}), overwrite, crs, True, arch) for f in files]
@@ -697,8 +688,9 @@ def run_batch(algorithm_id: str, files: Sequence[str], outdir: str, params: Mapp
             _collect_batch(cf, futures, running, runs, failed, bar)
         except BaseException:
             stop_workers(pool, futures)
-            if created and not any(out.iterdir()):
-                out.rmdir()
+            for d in reversed(created):  # the folders made for it, if the stopped batch left them empty
+                if d.is_dir() and not any(d.iterdir()):
+                    d.rmdir()
             raise
     bar.close()
     return {
@@ -726,15 +718,12 @@ def stop_workers(pool, futures) -> None:
 def _check_batch_outputs(alg: Algorithm, files: Sequence[str], out: Path, reg: Registry) -> None:
     """Before any file runs: no output is an input, and no two inputs write the same output."""
     owner: dict[str, str] = {}
-    by_name = {o.name: o for o in alg.outputs}
+    optional = {o.name for o in alg.outputs if o.optional}
     for f in files:
-        paths = {n: p for n, p in plan_outputs(alg, out, None, Path(f).stem).items()
-                 if not by_name[n].optional and by_name[n].kind != "folder"}
-        every = dict(paths)
-        for n, p in paths.items():
-            every.update({f"{n}+{i}": side for i, side in enumerate(sidecars_of(by_name[n], Path(p), reg.style_dirs))})
+        paths = {n: p for n, p in plan_outputs(alg, out, None, Path(f).stem).items() if n not in optional}
+        every = files_of(alg, paths, reg.style_dirs)
         check_not_inputs(every, files)
-        for p in every.values():
+        for p in every:
             key = os.path.realpath(p)
             if key in owner and owner[key] != f:
                 raise UsageError(f"inputs {owner[key]!r} and {f!r} would both write {str(p)!r} (same file name); "

@@ -33,6 +33,7 @@ import json
 import logging
 import os
 import resource
+import shutil
 import socket
 import time
 from dataclasses import asdict, dataclass
@@ -852,8 +853,6 @@ def remove_leftovers(folders) -> int:
         for p in list(folder.rglob(".*.partial*")):
             try:
                 if p.is_dir():
-                    import shutil
-
                     shutil.rmtree(p)
                 else:
                     p.unlink()
@@ -920,12 +919,9 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
 
     files = expand_survey_inputs(inputs)
     catalog = build_catalog(files, crs)
-    if not out.exists():  # (once the inputs are known to be readable: a refused run makes nothing)
-        try:
-            out.mkdir(parents=True)
-        except OSError as exc:
-            raise DataError(f"output folder {str(out)!r} cannot be made ({exc.strerror}); choose another location") \
-                from None
+    from .io.atomic import make_folder
+
+    make_folder(out)  # (once the inputs are known to be readable: a refused run makes nothing)
     hu = catalog.horizontal_unit_m
     declared = alg.buffer_m(values)
     buffer_used_m = float(buffer_m if buffer_m is not None else (declared or 0.0))

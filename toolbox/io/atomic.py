@@ -42,14 +42,7 @@ class Staging:
 
     def make_dirs(self, folder: Path) -> None:
         """Create ``folder`` (and missing parents), remembering what was new."""
-        folder = Path(folder)
-        missing = []
-        p = folder
-        while not p.exists() and p != p.parent:
-            missing.append(p)
-            p = p.parent
-        folder.mkdir(parents=True, exist_ok=True)
-        self.created_dirs.extend(reversed(missing))
+        self.created_dirs.extend(make_folder(folder))
 
     def commit(self) -> None:
         """Rename every staged file into place; SIGINT and SIGTERM wait until the renames are done."""
@@ -131,6 +124,25 @@ def _remove_temporary(tmp: Path) -> None:
     for extra in tmp.parent.glob(tmp.name + ".*"):
         with contextlib.suppress(OSError):
             extra.unlink()
+
+
+def make_folder(folder) -> list[Path]:
+    """Make an output folder and its missing parents; returns the folders made, outermost first
+    (for removing them again). One-line DataError when a file is in the way or the system says no."""
+    folder = Path(folder) if str(folder) else Path(".")
+    missing, p = [], folder
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    if not p.is_dir():
+        where = f"output folder {str(folder)!r}" + ("" if p == folder else f" cannot be made: {str(p)!r}")
+        raise DataError(f"{where} is a file, not a folder; choose another output location")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"output folder {str(folder)!r} cannot be made ({exc.strerror}); choose another output "
+                        "location") from None
+    return list(reversed(missing))
 
 
 def check_name_length(path: Path) -> None:

@@ -340,6 +340,14 @@ def check_las_header(hdr, path) -> None:
                             "through them: repair the header (e.g. las2las -rescale / -reoffset) or re-export the file")
 
 
+def _header_gives_finite_coordinates(hdr) -> bool:
+    """Whether every coordinate a record can hold (a 32-bit integer times the scale plus the
+    offset) is finite, so that decoded points need no check."""
+    sc, off = np.asarray(hdr.scales, np.float64), np.asarray(hdr.offsets, np.float64)
+    with np.errstate(over="ignore"):
+        return bool(np.isfinite(np.abs(sc) * 2.0**31 + np.abs(off)).all())
+
+
 def drop_non_finite(pc: PointCloud, refuse_when_none_left: bool = True) -> PointCloud:
     """The cloud without points whose x, y or z is NaN or infinite, with a warning that counts them;
     the count is kept in ``pc.meta['n_dropped_non_finite']`` for the run report."""
@@ -398,7 +406,8 @@ def read_points(path: str | os.PathLike, crs=None, dims=None) -> PointCloud:
         fields=fields, source=str(path), header=hdr,
     )
     pc.meta["_xyz_source"] = (pc.x, pc.y, pc.z, las.points)
-    pc = drop_non_finite(pc)
+    if not _header_gives_finite_coordinates(hdr):  # (else a pass over every point would find nothing)
+        pc = drop_non_finite(pc)
     crs_final = user_crs if user_crs is not None else file_crs
     _warn_without_crs(path, crs_final, len(pc))
     return _apply_crs(pc, crs_final, hdr)
@@ -463,6 +472,7 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
     with reader:
         hdr = reader.header
         check_las_header(hdr, path)
+        finite = _header_gives_finite_coordinates(hdr)
         crs_final = user_crs if user_crs is not None else _safe_parse_crs(hdr)
         seen = 0
         try:
@@ -473,7 +483,7 @@ def iter_points(path: str | os.PathLike, chunk_points: int = 1_000_000, crs=None
                     x=np.asarray(chunk.x), y=np.asarray(chunk.y), z=np.asarray(chunk.z),
                     fields=fields, source=str(path), header=hdr,
                 )
-                yield _apply_crs(drop_non_finite(pc, refuse_when_none_left=False), crs_final, hdr)
+                yield _apply_crs(pc if finite else drop_non_finite(pc, refuse_when_none_left=False), crs_final, hdr)
         except _decode_errors() as exc:
             raise DataError(f"input {str(path)!r} is truncated or corrupt after {seen} points ({_short(str(exc))})") from None
         if seen != hdr.point_count:
