@@ -104,7 +104,7 @@ def terrain_slope_p90(sample: str, cell: float) -> float:
 
 def _error(job) -> float:
     """Total error (%) of the filter on one sample with one combination of the grid."""
-    from toolbox_plugins.morph_dtm.core import ground_filter
+    from toolbox_plugins.morph_dtm.core import GroundSettings, ground_filter
     from toolbox_plugins.morph_dtm.evaluation import ground_errors
 
     sample, key = job
@@ -115,13 +115,13 @@ def _error(job) -> float:
     if isinstance(k, str):
         k = float(k[1:]) * terrain_slope_p90(sample, cell)
     refine = c["refine"]
-    gr = ground_filter(
-        pc.x, pc.y, pc.z, cell=cell, max_size=FIXED["max_filter_size_m"], k=k,
+    gr = ground_filter(pc.x, pc.y, pc.z, GroundSettings(
+        cell=cell, max_size=FIXED["max_filter_size_m"], k=k,
         n=c["min_height_n_m"], ground_threshold=c["ground_threshold_m"], slope_factor=FIXED["slope_factor"],
         low_outlier=FIXED["low_outlier_m"], jump=c["jump_m"] or None, refine=refine != "none",
         min_terrace_cells=max(1, int(np.ceil(FIXED["min_terrace_m2"] / cell ** 2))),
         refill_gaps=c["refill_gaps"], refine_cell=cell if refine == "filter" else None, min_refine_cell=1.0,
-        refine_per_spacing=c["refine_per_spacing"])
+        refine_per_spacing=c["refine_per_spacing"]))
     return ground_errors(truth, gr.ground)["total_pct"]
 
 

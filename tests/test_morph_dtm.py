@@ -137,9 +137,9 @@ def _terrace_scene():
 def test_a_terrace_below_buildings_stays_ground():
     x, y, z, terrace, building = _terrace_scene()
     args = dict(cell=2.0, max_size=50.0, k=0.08, n=0.45, ground_threshold=0.25, slope_factor=1.0, low_outlier=2.0)
-    opening_only = core.ground_filter(x, y, z, **args)
+    opening_only = core.ground_filter(x, y, z, core.GroundSettings(**args))
     assert opening_only.ground[terrace].mean() < 0.5  # the window opening takes the terrace for an object
-    r = core.ground_filter(x, y, z, **args, jump=1.5, min_terrace_cells=10)
+    r = core.ground_filter(x, y, z, core.GroundSettings(**args, jump=1.5, min_terrace_cells=10))
     assert r.ground[terrace].mean() > 0.95  # all but the cells against the walls
     assert r.ground[building].mean() < 0.01  # raised above the terrace and the lower ground: still objects
     assert r.ground[~terrace & ~building].mean() > 0.98
@@ -150,8 +150,8 @@ def test_refine_cell_follows_the_point_spacing():
     for density in (0.2, 1.0, 8.0):  # points per m2: spacing 2.24, 1.0, 0.35 m
         n = int(100 * 80 * density)
         x, y = rng.uniform(0, 100, n), rng.uniform(0, 80, n)
-        r = core.ground_filter(x, y, 0.02 * x + rng.normal(0, 0.02, n), 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0,
-                               min_refine_cell=1.0)
+        r = core.ground_filter(x, y, 0.02 * x + rng.normal(0, 0.02, n),
+                               core.GroundSettings(2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0, min_refine_cell=1.0))
         assert r.point_spacing == pytest.approx(density ** -0.5, rel=0.06)
         assert r.surface_grid.cell == pytest.approx(np.clip(1.25 * r.point_spacing, 1.0, 2.0))
         assert r.ground.mean() > 0.999  # a plain slope is all ground on every grid
@@ -589,8 +589,9 @@ def test_dtm_kernels_match_their_numpy_references():
     np.testing.assert_allclose(dz, dz_ref, rtol=0, atol=1e-9)
     assert 0.2 < near_ref.mean() < 0.95 and (near != near_ref).sum() <= 2  # both sides of the test occur
     # the whole filter gives the same labels either way
-    a = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0)
-    b = core.ground_filter(x, y, z, 2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0, accel=acc)
+    settings = core.GroundSettings(2.0, 30.0, 0.08, 0.45, 0.25, 1.0, 2.0)
+    a = core.ground_filter(x, y, z, settings)
+    b = core.ground_filter(x, y, z, settings, accel=acc)
     assert (a.ground != b.ground).sum() <= 2  # only float-rounding ties at the tolerance may differ
 
 

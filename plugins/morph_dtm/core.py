@@ -359,12 +359,30 @@ def _finer_domain(grid: Grid, domain: np.ndarray, fine: Grid) -> np.ndarray:
     return domain[r, c]
 
 
-def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, ground_threshold: float,
-                  slope_factor: float, low_outlier: float, growth: float = 1.3, refine: bool = True,
-                  accel=None, jump=None, min_terrace_cells: int = 1, raised_share: float = 0.5,
-                  refill_gaps: bool = True, refine_cell: float | None = None,
-                  min_refine_cell: float = 0.0, refine_per_spacing: float = 1.25) -> GroundResult:
-    """Label ground points (all lengths in the cloud's units).
+@dataclass(frozen=True)
+class GroundSettings:
+    """Every value the ground filter takes, in the cloud's units (see ``ground_filter``)."""
+
+    cell: float  # the filter grid
+    max_size: float  # the largest object the opening removes (its width)
+    k: float  # Δh ≥ n + k · size
+    n: float
+    ground_threshold: float  # height of a ground point over the surface on flat ground
+    slope_factor: float  # extra tolerance per unit of slope, x the cell
+    low_outlier: float  # this far under its neighbourhood a point is noise
+    growth: float = 1.3  # the windows' geometric growth
+    refine: bool = True
+    jump: float | None = None  # the connected-operator test's height jump (None: off)
+    min_terrace_cells: int = 1
+    raised_share: float = 0.5
+    refill_gaps: bool = True
+    refine_cell: float | None = None  # the last refinement's cell (None: from the point spacing)
+    min_refine_cell: float = 0.0
+    refine_per_spacing: float = 1.25
+
+
+def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult:
+    """Label ground points with ``settings`` (all lengths in the cloud's units).
 
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
        neighbourhood).
@@ -385,28 +403,30 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
     ``accel`` (optional) provides ``minimum_surface``, ``moments`` and ``near_surface`` doing the
     per-point passes in parallel kernels; the numpy versions here are their references.
     """
+    s = settings
+    cell = s.cell
     grid = Grid.around(x, y, cell)
     zmin, flat = accel.minimum_surface(grid, x, y, z) if accel is not None else minimum_surface(grid, x, y, z)
-    noise = low_outliers(grid, z, flat, zmin, low_outlier)
+    noise = low_outliers(grid, z, flat, zmin, s.low_outlier)
     if noise.any():
         zmin = minimum_surface_without(grid, zmin, flat, z, noise)
     occupied = np.isfinite(zmin)
     domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
     filled = fill_holes(zmin, occupied, domain)
     gaps = domain & ~occupied
-    for again in range(2 if refill_gaps and gaps.any() else 1):
+    for again in range(2 if s.refill_gaps and gaps.any() else 1):
         if again:
             # a gap (water, a shadow) was filled from the cells around it, trees on its rim
             # included, so the rim's objects were not raised above it: fill it from the ground
             filled = np.where(occupied, zmin, provisional)
-        is_object, _, _ = multiscale_opening(filled, cell, max_size, k, n, growth)
+        is_object, _, _ = multiscale_opening(filled, cell, s.max_size, s.k, s.n, s.growth)
         terraces = raised_cells = None
-        if jump is not None:
+        if s.jump is not None:
             # a window opening also cuts away terraces, courtyards and ground between buildings: the
             # connected-operator test keeps the object sets that are not raised above their surroundings
-            rise = segment_rise(filled, is_object, domain, jump)
-            terraces = not_raised(filled, is_object, domain, jump, raised_share, min_terrace_cells, rise)
-            raised_cells = raised(rise, raised_share)
+            rise = segment_rise(filled, is_object, domain, s.jump)
+            terraces = not_raised(filled, is_object, domain, s.jump, s.raised_share, s.min_terrace_cells, rise)
+            raised_cells = raised(rise, s.raised_share)
             is_object &= ~terraces
         keep = occupied & ~is_object
         if not keep.any():
@@ -418,19 +438,19 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
 
     def near(g, surface):
         if accel is not None:
-            return accel.near_surface(g, x, y, z, surface, surface_slope(surface, g.cell), ground_threshold,
-                                      slope_factor, low_outlier)
+            return accel.near_surface(g, x, y, z, surface, surface_slope(surface, g.cell), s.ground_threshold,
+                                      s.slope_factor, s.low_outlier)
         if id(g) not in samplers:
             samplers[id(g)] = Sampler(g, x, y)
         sample = samplers[id(g)]
-        return _near_surface(sample, g.cell, surface, z, ground_threshold, slope_factor, low_outlier)
+        return _near_surface(sample, g.cell, surface, z, s.ground_threshold, s.slope_factor, s.low_outlier)
 
     ground, dz = near(grid, provisional)
     ground &= ~noise
     surface, surface_grid = provisional, grid
-    if refine:
-        fine_cell = refine_cell if refine_cell is not None else refine_cell_size(spacing, cell, min_refine_cell,
-                                                                                 refine_per_spacing)
+    if s.refine:
+        fine_cell = s.refine_cell if s.refine_cell is not None else \
+            refine_cell_size(spacing, cell, s.min_refine_cell, s.refine_per_spacing)
         fine = grid if fine_cell == cell else Grid.around(x, y, fine_cell)
         # the surface fitted to the ground points (a plane per cell) follows the terrain between
         # cell minima; once more on a grid matched to the point spacing, which follows breaklines.
@@ -454,7 +474,7 @@ def ground_filter(x, y, z, cell: float, max_size: float, k: float, n: float, gro
             ground, dz = near(g, surface)
             ground &= ~noise
             support = ground if off_raised is None else ground & off_raised
-    noise |= dz < -2 * low_outlier
+    noise |= dz < -2 * s.low_outlier
     return GroundResult(ground, noise, grid, provisional, is_object, terraces, surface, surface_grid, spacing)
 
 

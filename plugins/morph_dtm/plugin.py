@@ -42,21 +42,21 @@ def _ground(pc, p, accel=None):
     """Run the ground filter with the parameters converted to the cloud's units."""
     import numpy as np
 
-    from .core import Grid, ground_filter
+    from .core import Grid, GroundSettings, ground_filter
 
     pc.require_points("the ground filter", 10)
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     cell = p["filter_cell_m"] / hu
     _check_grid(pc, cell, "filter_cell_m")
-    return ground_filter(
-        pc.x, pc.y, pc.z, cell=cell, max_size=p["max_filter_size_m"] / hu,
+    settings = GroundSettings(
+        cell=cell, max_size=p["max_filter_size_m"] / hu,
         k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
-        slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu, accel=accel,
+        slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu,
         jump=p["jump_m"] / vu if p["jump_m"] > 0 else None,
         min_terrace_cells=max(1, int(np.ceil(p["min_terrace_m2"] / (p["filter_cell_m"] ** 2)))),
         refine_cell=None if p["refine_cell_m"] is None else p["refine_cell_m"] / hu,
-        min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu,
-    ), Grid
+        min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu)
+    return ground_filter(pc.x, pc.y, pc.z, settings, accel=accel), Grid
 
 
 BYTES_PER_CELL = 320  # the DTM fit holds about 40 float64 grids at once
