@@ -146,7 +146,7 @@ PARAM_VALUE = st.one_of(st.sampled_from(["nan", "inf", "-inf", "auto", "", "1e40
 
 @SETTINGS
 @given(values=st.dictionaries(st.sampled_from(["resolution_m", "filter_cell_m", "max_filter_size_m", "slope_k",
-                                               "refine_cell_m", "ground", "jump_m", "min_terrace_m2", "no_such"]),
+                                               "refine_cell_m", "ground", "min_height_n_m", "ground_threshold_m", "no_such"]),
                               PARAM_VALUE, min_size=1, max_size=3))
 def test_generated_parameter_values(values, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("params")

@@ -88,7 +88,8 @@ def _isprs_scores(tmp_path):
 def test_isprs_reference_samples_with_one_default_parameter_set(tmp_path):
     """Every ISPRS filter-test sample present, one parameter set (the defaults), against the
     reference labels. The bounds are this filter's measured figures with a small margin (12-sample
-    mean 3.99 %, kappa 0.848; SMRF with PDAL's defaults: 5.06 %, 0.823): a regression fails."""
+    mean 4.09 %, kappa 0.843; SMRF with PDAL's defaults: 5.06 %, 0.823): a regression fails. (The
+    connected-operator rule that took the mean to 3.99 % went: it gained nothing out of sample.)"""
     scores = _isprs_scores(tmp_path)
     for s, st in scores.items():
         assert st["isprs_total_pct"] <= 10.0, (s, st)
@@ -99,14 +100,10 @@ def test_isprs_reference_samples_with_one_default_parameter_set(tmp_path):
         assert 1.0 < scores["samp11"]["point_spacing_m"] < 1.1  # the sample's documented ~1 m spacing
     if "samp12" in scores:
         assert scores["samp12"]["isprs_total_pct"] <= 3.3
-    if "samp41_f32" in scores:  # ground on a terrace between buildings, cut away by the opening alone
+    if "samp41_f32" in scores:  # ground on a terrace between buildings, cut away by the opening
         assert scores["samp41_f32"]["isprs_total_pct"] <= 6.2
-        assert scores["samp41_f32"]["terrace_m2_kept"] > 1000  # reported in the run report
-    if "samp23_f32" in scores:  # a raised square: the segment test gives it back
-        assert scores["samp23_f32"]["isprs_total_pct"] <= 4.6
-        alone = toolbox.run("dtm", SHARED_DATA_ISPRS / "samp23_f32.txt", tmp_path / "alone.tif",
-                            crs="EPSG:32632", jump_m=0.0)["stats"]  # the opening alone, as the method has it
-        assert alone["terrace_m2_kept"] is None and alone["isprs_total_pct"] > 6.0
+    if "samp23_f32" in scores:  # a raised square, cut away by the opening
+        assert scores["samp23_f32"]["isprs_total_pct"] <= 7.1
     if "samp52_f32" in scores:  # trees on the rims of data gaps (a river): gaps refilled from ground
         assert scores["samp52_f32"]["isprs_total_pct"] <= 4.1
         assert scores["samp52_f32"]["refine_cell_m_used"] == 2.0  # sparse (2.4 m spacing): the filter cell
@@ -114,35 +111,8 @@ def test_isprs_reference_samples_with_one_default_parameter_set(tmp_path):
         pytest.skip(f"the 12-sample mean needs all of {ISPRS_SAMPLES}; only {sorted(scores)} are present")
     mean = np.mean([st["isprs_total_pct"] for st in scores.values()])
     kappa = np.mean([st["isprs_kappa"] for st in scores.values()])
-    assert mean <= 4.1, {s: st["isprs_total_pct"] for s, st in scores.items()}
-    assert kappa >= 0.845
-
-
-def _terrace_scene():
-    """Lower ground (z 0), a terrace 6 m higher behind a retaining wall on its east side, and a
-    20 m building block wrapped round its other three sides (ISPRS samp41's layout); terrace and
-    block together narrower than the largest window."""
-    rng = np.random.default_rng(5)
-    x = rng.uniform(0, 120, 60000)
-    y = rng.uniform(0, 100, 60000)
-    z = np.zeros_like(x)
-    terrace = (x >= 24) & (x < 48) & (y >= 15) & (y < 85)
-    building = (x >= 12) & (x < 60) & (y >= 3) & (y < 97) & ~terrace & ~((x >= 48) & (y >= 15) & (y < 85))
-    z[terrace] = 6.0
-    z[building] = 20.0
-    z += rng.normal(0, 0.03, len(z))
-    return x, y, z, terrace, building
-
-
-def test_a_terrace_below_buildings_stays_ground():
-    x, y, z, terrace, building = _terrace_scene()
-    args = dict(cell=2.0, max_size=50.0, k=0.08, n=0.45, ground_threshold=0.25, slope_factor=1.0, low_outlier=2.0)
-    opening_only = core.ground_filter(x, y, z, core.GroundSettings(**args))
-    assert opening_only.ground[terrace].mean() < 0.5  # the window opening takes the terrace for an object
-    r = core.ground_filter(x, y, z, core.GroundSettings(**args, jump=1.5, min_terrace_cells=10))
-    assert r.ground[terrace].mean() > 0.95  # all but the cells against the walls
-    assert r.ground[building].mean() < 0.01  # raised above the terrace and the lower ground: still objects
-    assert r.ground[~terrace & ~building].mean() > 0.98
+    assert mean <= 4.15, {s: st["isprs_total_pct"] for s, st in scores.items()}
+    assert kappa >= 0.84
 
 
 def test_refine_cell_follows_the_point_spacing():
@@ -156,32 +126,6 @@ def test_refine_cell_follows_the_point_spacing():
         assert r.surface_grid.cell == pytest.approx(np.clip(1.25 * r.point_spacing, 1.0, 2.0))
         assert r.ground.mean() > 0.999  # a plain slope is all ground on every grid
     assert core.refine_cell_size(0.4, 2.0, 0.5) == 0.5 and core.refine_cell_size(3.0, 2.0, 0.5) == 2.0
-
-
-def test_not_raised_tells_terraces_from_roofs():
-    """On a grid: a building raised all round stays an object, a lower wing against a higher
-    roof (ground on three sides) too; a pit-like terrace below its neighbours does not."""
-    surf = np.zeros((60, 60))
-    surf[5:15, 5:15] = 8.0  # a building
-    surf[25:35, 5:15] = 5.0  # a lower wing ...
-    surf[25:35, 15:25] = 12.0  # ... against a higher roof
-    surf[40:55, 40:55] = 20.0  # a ring of buildings ...
-    surf[44:51, 44:51] = 3.0  # ... round a raised court
-    obj = surf > 0
-    dom = np.ones_like(obj)
-    keep = core.not_raised(surf, obj, dom, step=1.5)
-    assert not keep[5:15, 5:15].any()
-    assert not keep[25:35, 5:25].any()
-    assert keep[44:51, 44:51].all() and not keep[40:44, 40:55].any()
-    label, n = core.object_segments(surf, obj, 1.5)
-    assert n == 5 and (label[~obj] == -1).all()
-    assert len(np.unique(label[25:35, 5:15])) == 1 and label[30, 10] != label[30, 20]
-    # a segment smaller than min_cells is never given back
-    assert not core.not_raised(surf, obj, dom, step=1.5, min_cells=50)[44:51, 44:51].any()
-    # the converse, any size: the building, the roofs and the ring are raised, the court is not
-    up = core.raised(core.segment_rise(surf, obj, dom, 1.5))
-    assert up[5:15, 5:15].all() and up[25:35, 15:25].all() and up[40:44, 40:55].all()
-    assert not up[44:51, 44:51].any() and not up[~obj].any()
 
 
 def test_ground_errors_definitions():

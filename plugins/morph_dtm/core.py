@@ -253,80 +253,6 @@ def surface_slope(surface: np.ndarray, cell: float) -> np.ndarray:
     return np.hypot(dx, dy)
 
 
-def _neighbour_pairs(shape):
-    """Flat indices of every 4-neighbour cell pair of a grid (each pair once)."""
-    rows, cols = shape
-    idx = np.arange(rows * cols).reshape(rows, cols)
-    a = np.r_[idx[:, :-1].ravel(), idx[:-1, :].ravel()]
-    b = np.r_[idx[:, 1:].ravel(), idx[1:, :].ravel()]
-    return a, b
-
-
-def object_segments(surface, is_object, step, pairs=None):
-    """Connected sets of object cells, neighbours joined where their heights differ by at most
-    ``step``: (label per cell, -1 off the objects; number of segments). ``pairs``: the grid's
-    ``_neighbour_pairs``, when the caller has them."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    f = surface.ravel()
-    o = is_object.ravel()
-    a, b = _neighbour_pairs(surface.shape) if pairs is None else pairs
-    join = o[a] & o[b] & (np.abs(f[a] - f[b]) <= step)
-    ids = np.flatnonzero(o)
-    pos = np.full(f.size, -1, np.int64)
-    pos[ids] = np.arange(len(ids))
-    g = coo_matrix((np.ones(int(join.sum())), (pos[a[join]], pos[b[join]])), shape=(len(ids), len(ids)))
-    n_seg, lab = connected_components(g, directed=False)
-    label = np.full(f.size, -1, np.int64)
-    label[ids] = lab
-    return label.reshape(surface.shape), n_seg
-
-
-def segment_rise(surface, is_object, domain, step):
-    """Object cells in segments (``object_segments``) and how each stands over its surroundings:
-    (label per cell, -1 off the objects; cells per segment; border length and the part of it
-    where the segment stands more than ``step`` over the neighbouring cell). Borders with cells
-    outside ``domain`` (the survey's footprint) say nothing either way and are not counted."""
-    a, b = _neighbour_pairs(surface.shape)
-    label, n_seg = object_segments(surface, is_object, step, (a, b))
-    f = surface.ravel()
-    lab = label.ravel()
-    dom = domain.ravel()
-    up = np.zeros(n_seg)
-    border = np.zeros(n_seg)
-    for s_, t_ in ((a, b), (b, a)):
-        m = (lab[s_] >= 0) & (lab[s_] != lab[t_]) & dom[t_]
-        border += np.bincount(lab[s_[m]], minlength=n_seg)
-        up += np.bincount(lab[s_[m]], weights=(f[s_[m]] - f[t_[m]] > step), minlength=n_seg)
-    size = np.bincount(lab[lab >= 0], minlength=n_seg)
-    return label, size, border, up
-
-
-def _per_cell(label, per_segment):
-    out = np.zeros(label.shape, bool)
-    on = label >= 0
-    out[on] = per_segment[label[on]]
-    return out
-
-
-def not_raised(surface, is_object, domain, step, raised_share=0.5, min_cells=1, rise=None):
-    """Object segments that are not raised above their surroundings: along less than
-    ``raised_share`` of their border (inside ``domain``) they stand more than ``step`` over the
-    neighbouring cell. The connected-operator view of an object (Mongus & Žalik 2014): a terrace or
-    a courtyard that a window opening cuts away lies *below* the buildings around it.
-    ``rise``: ``segment_rise``'s answer, when the caller has it."""
-    label, size, border, up = rise if rise is not None else segment_rise(surface, is_object, domain, step)
-    return _per_cell(label, (size >= min_cells) & (border > 0) & (up < raised_share * border))
-
-
-def raised(rise, raised_share=0.5):
-    """The converse, any size: object segments standing more than the step over their
-    surroundings along at least ``raised_share`` of their border (roofs, bridge decks, crowns)."""
-    label, size, border, up = rise
-    return _per_cell(label, (border > 0) & (up >= raised_share * border))
-
-
 @dataclass
 class GroundResult:
     ground: np.ndarray  # bool per point
@@ -334,7 +260,6 @@ class GroundResult:
     grid: Grid  # the filter grid
     provisional: np.ndarray  # provisional bare-earth surface on the filter grid (after the opening)
     object_cells: np.ndarray  # cells removed by the multi-scale filter
-    terrace_cells: np.ndarray | None = None  # cells the opening removed that the segment test kept
     surface: np.ndarray | None = None  # the surface the final ground test used, on ``surface_grid``
     surface_grid: Grid | None = None
     point_spacing: float = float("nan")  # mean point spacing over the footprint (cloud's units)
@@ -372,9 +297,6 @@ class GroundSettings:
     low_outlier: float  # this far under its neighbourhood a point is noise
     growth: float = 1.3  # the windows' geometric growth
     refine: bool = True
-    jump: float | None = None  # the connected-operator test's height jump (None: off)
-    min_terrace_cells: int = 1
-    raised_share: float = 0.5
     refill_gaps: bool = True
     refine_cell: float | None = None  # the last refinement's cell (None: from the point spacing)
     min_refine_cell: float = 0.0
@@ -387,10 +309,7 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
     1. Lowest point per cell; isolated low outliers removed (``low_outlier`` below their
        neighbourhood).
     2. Empty cells filled (harmonic), then the multi-scale opening marks object cells
-       (Δh ≥ n + k·size up to ``max_size``). With ``jump``, object cells are grouped into
-       segments (neighbours less than ``jump`` apart in height), and a segment of at least
-       ``min_terrace_cells`` that stands more than ``jump`` over its neighbours along less than
-       ``raised_share`` of its border is ground again (``not_raised``). With ``refill_gaps``, the
+       (Δh ≥ n + k·size up to ``max_size``). With ``refill_gaps``, the
        empty cells are filled again from the cells kept as ground and the opening repeated.
     3. The remaining cells' minima, holes filled, give a provisional bare earth; a point is
        ground when it lies within ``ground_threshold + slope_factor · slope · cell`` of it
@@ -420,14 +339,6 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
             # included, so the rim's objects were not raised above it: fill it from the ground
             filled = np.where(occupied, zmin, provisional)
         is_object, _, _ = multiscale_opening(filled, cell, s.max_size, s.k, s.n, s.growth)
-        terraces = raised_cells = None
-        if s.jump is not None:
-            # a window opening also cuts away terraces, courtyards and ground between buildings: the
-            # connected-operator test keeps the object sets that are not raised above their surroundings
-            rise = segment_rise(filled, is_object, domain, s.jump)
-            terraces = not_raised(filled, is_object, domain, s.jump, s.raised_share, s.min_terrace_cells, rise)
-            raised_cells = raised(rise, s.raised_share)
-            is_object &= ~terraces
         keep = occupied & ~is_object
         if not keep.any():
             keep = occupied
@@ -453,10 +364,7 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
             refine_cell_size(spacing, cell, s.min_refine_cell, s.refine_per_spacing)
         fine = grid if fine_cell == cell else Grid.around(x, y, fine_cell)
         # the surface fitted to the ground points (a plane per cell) follows the terrain between
-        # cell minima; once more on a grid matched to the point spacing, which follows breaklines.
-        # What a pass adds on a raised object never supports the next: at a bridge's end the deck
-        # continues the road, and each pass would climb further onto it
-        off_raised = None if raised_cells is None else ~raised_cells.ravel()[flat]
+        # cell minima; once more on a grid matched to the point spacing, which follows breaklines
         support = ground
         passes = ((grid, domain), (fine, domain if fine is grid else None))
         if fine.cell <= 0.5 * cell:
@@ -473,9 +381,9 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
             surface_grid = g
             ground, dz = near(g, surface)
             ground &= ~noise
-            support = ground if off_raised is None else ground & off_raised
+            support = ground
     noise |= dz < -2 * s.low_outlier
-    return GroundResult(ground, noise, grid, provisional, is_object, terraces, surface, surface_grid, spacing)
+    return GroundResult(ground, noise, grid, provisional, is_object, surface, surface_grid, spacing)
 
 
 def _near_surface(sample, cell, surface, z, threshold, slope_factor, below):

@@ -25,12 +25,6 @@ GROUND_PARAMETERS = [
               minimum=0.0, maximum=10.0),
     Parameter("low_outlier_m", float, 2.0, "points this far below their neighbourhood are noise (class 7)",
               unit="m", minimum=0.1, maximum=100.0),
-    Parameter("jump_m", float, 1.5, "height jump between neighbouring filter cells that separates two surfaces "
-              "(a wall, a terrace edge); a set the opening removed stays ground unless it stands more than "
-              "this over its surroundings along at least half its border; 0 keeps the opening alone",
-              unit="m", minimum=0.0, maximum=50.0),
-    Parameter("min_terrace_m2", float, 40.0, "smallest such set (terrace, courtyard) given back to the ground",
-              unit="m2", minimum=0.0, maximum=1e6),
     Parameter("refine_cell_m", float, None, "cell of the last refinement surface (a plane per 3x3 cells through "
               "the ground points); auto: 1.25 x the mean point spacing, between 1 m and filter_cell_m "
               "(reported as refine_cell_m_used)", unit="m", minimum=0.1, maximum=50.0, allow_auto=True),
@@ -40,8 +34,6 @@ MIN_AUTO_REFINE_CELL_M = 1.0  # finer grids cost memory and time on dense tiles 
 
 def _ground(pc, p, accel=None):
     """Run the ground filter with the parameters converted to the cloud's units."""
-    import numpy as np
-
     from .core import Grid, GroundSettings, ground_filter
 
     pc.require_points("the ground filter", 10)
@@ -52,8 +44,6 @@ def _ground(pc, p, accel=None):
         cell=cell, max_size=p["max_filter_size_m"] / hu,
         k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
         slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu,
-        jump=p["jump_m"] / vu if p["jump_m"] > 0 else None,
-        min_terrace_cells=max(1, int(np.ceil(p["min_terrace_m2"] / (p["filter_cell_m"] ** 2)))),
         refine_cell=None if p["refine_cell_m"] is None else p["refine_cell_m"] / hu,
         min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu)
     return ground_filter(pc.x, pc.y, pc.z, settings, accel=accel), Grid
@@ -80,9 +70,7 @@ def _ground_and_noise(pc, params, accel=None):
         return cls0 == 2, cls0 == 7, {}
     gr, _ = _ground(pc, params, accel)
     hu = pc.horizontal_unit_m
-    # area of the terraces / courtyards the segment test gave back to the ground (m², reported)
-    terraces = None if gr.terrace_cells is None else round(float(gr.terrace_cells.sum()) * (gr.grid.cell * hu) ** 2, 1)
-    return gr.ground, gr.noise, {"terrace_m2_kept": terraces, "point_spacing_m": round(gr.point_spacing * hu, 3),
+    return gr.ground, gr.noise, {"point_spacing_m": round(gr.point_spacing * hu, 3),
                                  "refine_cell_m_used": round(gr.surface_grid.cell * hu, 3)}
 
 
@@ -340,10 +328,7 @@ def toolbox_algorithms():
                 "Ground filter by multi-scale morphological opening: openings of growing size up to the largest "
                 "object; at each cell the scale with the largest height drop is the object's size, and it is "
                 "removed when Δh ≥ n + k·size; gaps in the data (water, shadows) are filled from the ground the "
-                "first opening kept and the opening repeated, so trees on a gap's rim stand out. A removed set that does not stand over its surroundings "
-                "(segments split at height jumps over jump_m; raised along less than half their border: a "
-                "terrace below buildings, a raised square, ground between blocks) is ground again (connected-"
-                "operator view; the area given back is reported as terrace_m2_kept). "
+                "first opening kept and the opening repeated, so trees on a gap's rim stand out. "
                 "Ground points lie within a slope-aware tolerance of the filtered "
                 "surface, refined by planes fitted to the ground points per 3x3 filter cells, then per 3x3 cells of "
                 "about the point spacing (refine_cell_m; where that is at most half the filter cell, there "
