@@ -43,7 +43,6 @@ def test_ground_and_dtm_accuracy_on_synthetic_truth(terrain_scene, tmp_path):
     assert rmse <= 0.08, rmse  # the method's published figure, over all cells (slopes, embankment, holes)
     assert rep["stats"]["n_noise"] >= 3  # the scene's low outliers
     # the bridge's deck continues the road at both ends: the refinement passes must not climb onto it
-    # (0.36 of the deck when each pass's ground supported the next unchecked)
     deck = truth == 17
     assert deck.sum() > 1000 and (pred[deck] == 2).mean() < 0.25  # 0.21 measured
 

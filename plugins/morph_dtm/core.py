@@ -365,23 +365,21 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
         fine = grid if fine_cell == cell else Grid.around(x, y, fine_cell)
         # the surface fitted to the ground points (a plane per cell) follows the terrain between
         # cell minima; once more on a grid matched to the point spacing, which follows breaklines
-        support = ground
         passes = ((grid, domain), (fine, domain if fine is grid else None))
         if fine.cell <= 0.5 * cell:
             # dense points: the fine grid's blocks hold plenty to start from the provisional surface,
             # and the pass on the filter grid changed nothing measurable but cost a pass over them
             passes = ((fine, None),)
         for g, dom in passes:
-            if support.sum() < 3:
+            if ground.sum() < 3:
                 break
             if dom is None:
                 dom = _finer_domain(grid, domain, g)
-            surface, _ = dtm_from_ground(g, x, y, z, where=support,
+            surface, _ = dtm_from_ground(g, x, y, z, where=ground,
                                          moments=accel.moments if accel is not None else None, domain=dom)
             surface_grid = g
             ground, dz = near(g, surface)
             ground &= ~noise
-            support = ground
     noise |= dz < -2 * s.low_outlier
     return GroundResult(ground, noise, grid, provisional, is_object, surface, surface_grid, spacing)
 
