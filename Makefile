@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench family install clean
+.PHONY: demo test bench family golden install clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,10 @@ SEEDS ?= 1-10
 family: $(STAMP)
 	$(PY) -m pip install -q --no-build-isolation -e ".[bench]"
 	$(PY) benchmarks/powerline_family.py --seeds $(SEEDS)
+
+# the power-line chain's golden outputs (#76): identical before and after a restructuring
+golden: $(STAMP)
+	$(PY) benchmarks/powerlines_golden.py check
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache build *.egg-info
