@@ -9,20 +9,33 @@ import geopandas as gpd
 import laspy
 import numpy as np
 import pytest
-
-import toolbox
 from conftest import shared_file
-from toolbox import kernels
-from toolbox.crossings import crossings
 from toolbox_plugins.hough_lines import core as hough
 from toolbox_plugins.hough_lines import kernels as hough_kernels
 from toolbox_plugins.hough_lines import reference
-from toolbox_plugins.powerlines.core import (_split_bundles, _two_means_1d, catenary, conductors_3d, fit_catenary, kink_cut,
-                                             line_fit,
-                                             local_surface_density, parabola_fit, peel_catenaries, shape_classes,
-                                             span_on_surface, split_spans, twin_lines)
+from toolbox_plugins.powerlines.core import (
+    _split_bundles,
+    _two_means_1d,
+    catenary,
+    conductors_3d,
+    ends_at_supports,
+    fit_catenary,
+    kink_cut,
+    line_fit,
+    local_surface_density,
+    parabola_fit,
+    peel_catenaries,
+    shape_classes,
+    span_on_surface,
+    split_spans,
+    twin_lines,
+)
 from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
 from toolbox_plugins.tophat.core import tophat_points, tophat_raster
+
+import toolbox
+from toolbox import kernels
+from toolbox.crossings import crossings
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +89,11 @@ def test_taichi_accumulator_equals_numpy_reference(n, seed, theta_step):
             b.vote(x[near], y[near], -1)
             left = np.setdiff1d(left, near)
             assert a.peak() == b.peak()
+
+
+def crossings_at_supports(lines, segments, supports=None):
+    """The host's crossings with the power lines' rule at the supports found."""
+    return crossings(lines, segments, excluded=ends_at_supports(lines, segments, supports))
 
 
 def test_a_subtraction_with_a_floor_keeps_every_row_that_can_still_peak_exact():
@@ -263,7 +281,6 @@ def test_tophat_keeps_lines_and_drops_blobs_and_dense_cells():
 def test_sparse_tophat_equals_the_raster_opening(shape, size):
     """The opening on occupied cells only gives the cells scipy's binary_opening of the mask does."""
     from scipy import ndimage
-
     from toolbox_plugins.tophat.core import structure
 
     rng = np.random.default_rng(size)
@@ -527,9 +544,8 @@ def test_side_by_side_is_not_chained_by_a_piece_drifting_across_the_gap(spacing,
     too, one holding two phases."""
     import geopandas as gpd
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _side_by_side
+    from toolbox_plugins.powerlines.plan_geometry import side_by_side
 
     offsets = [-spacing, 0.0, spacing]
     spans, xs, ys, wire = [], [], [], []
@@ -547,7 +563,7 @@ def test_side_by_side_is_not_chained_by_a_piece_drifting_across_the_gap(spacing,
     seg = gpd.GeoDataFrame({"conductor": [0]}, geometry=[line])
     geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 554.0)]
     params = {"max_rms_3d_m": 0.15, "s_min_m": 8.0}
-    lines, geo, spans, conductor_of, wire_of, added = _side_by_side(
+    lines, geo, spans, conductor_of, wire_of, added = side_by_side(
         {"conductors": cond, "conductor_segments": seg}, geo, spans, np.zeros(len(x), np.int64), wire_of, x, y,
         params, 1.0)
     assert added == n_conductors - 1 and len(lines["conductors"]) == n_conductors
@@ -579,7 +595,7 @@ def test_realign_turns_a_line_its_wire_leaves_not_one_its_spans_slopes_lean(lean
     each span) and the line, on its wire, stays (it turned 0.02 deg and missed its truth by
     0.1 m at both ends)."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _realign
+    from toolbox_plugins.powerlines.plan_geometry import realign
 
     slope = 4e-4
     spans = []
@@ -591,7 +607,7 @@ def test_realign_turns_a_line_its_wire_leaves_not_one_its_spans_slopes_lean(lean
                           offset_slope=slope, offset_rms=0.04, lateral_tol=0.12))
     lines, geo = _one_line_layers(573.0)
     params = {"max_rms_3d_m": 0.15, "s_min_m": 8.0, "band_m": 0.4}
-    out, geo2, turned = _realign(lines, geo, spans, params, 1.0, min_drift_m=0.1)
+    out, geo2, turned = realign(lines, geo, spans, params, 1.0, min_drift_m=0.1)
     assert turned == int(leaning)
     end = np.array(out["conductors"].geometry[0].coords)[-1]
     assert end[1] == pytest.approx(slope * 573.0 if leaning else 0.0, abs=0.005)  # on the wire
@@ -604,7 +620,7 @@ def test_a_triangle_bundles_line_runs_through_the_middle_of_its_sub_conductors()
     the line moves onto the middle of the outermost. A single wire with a 20 m piece of another
     0.15 m beside it stays on its wire."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _side_by_side
+    from toolbox_plugins.powerlines.plan_geometry import side_by_side
 
     params = {"max_rms_3d_m": 0.15, "s_min_m": 8.0}
     for offsets, pieces, want in (([-0.24, -0.04, 0.16], [], -0.04), ([0.0], [(100.0, 120.0, 0.15)], 0.0)):
@@ -619,7 +635,7 @@ def test_a_triangle_bundles_line_runs_through_the_middle_of_its_sub_conductors()
                               offset_rms=0.04, lateral_tol=0.12))
         x, y = np.concatenate(xs), np.concatenate(ys)
         lines, geo = _one_line_layers(554.0)
-        lines, geo, spans, conductor_of, _, added = _side_by_side(
+        lines, geo, spans, conductor_of, _, added = side_by_side(
             lines, geo, spans, np.zeros(len(x), np.int64), np.zeros(len(x), np.int64), x, y, params, 1.0)
         assert added == 0 and (conductor_of == 0).all()
         coords = np.array(lines["conductors"].geometry[0].coords)
@@ -761,8 +777,7 @@ def test_a_short_wire_along_two_roofs_tops_lies_in_surfaces_and_a_wire_over_them
     at one tilt, so the whole span is in no surface; cut where its points leave a gap, each
     piece lies in a roof of its own. The same wire 1 m over the roofs, and a ribbon's wire with
     a gap in it, are in none."""
-    from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.core import _pieces_on_surfaces
+    from toolbox_plugins.powerlines.core import Span, _pieces_on_surfaces
 
     rng = np.random.default_rng(3)
 
@@ -791,9 +806,8 @@ def test_a_second_pass_line_along_a_first_is_folded_into_it():
     same 3D curve (within a millimetre), becomes a new wire of that line, its points go to that
     line, and the line's extent and plan geometry stretch over it."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _fold_into
+    from toolbox_plugins.powerlines.wire_sets import fold_into
 
     ang = np.radians(0.5)
     dg = np.array([np.cos(ang), np.sin(ang)])
@@ -805,7 +819,7 @@ def test_a_second_pass_line_along_a_first_is_folded_into_it():
     line_of, wire_of = np.array([0, 0, -1, -1, -1]), np.array([0, 0, -1, -1, -1])
     pos = np.array([2, 3, 4])  # where pass 2's points sit
     line_of2, wire2 = np.array([0, 0, -1]), np.array([0, 0, -1])
-    spans, geo, lines = _fold_into({0: 0}, geo2, [sp], line_of2, wire2, geo, spans, lines, line_of, wire_of, pos, 1.0)
+    spans, geo, lines = fold_into({0: 0}, geo2, [sp], line_of2, wire2, geo, spans, lines, line_of, wire_of, pos, 1.0)
     new = [q for q in spans if q.conductor == 0 and q.wire == 1]
     assert len(new) == 1 and list(line_of) == [0, 0, 0, 0, -1] and list(wire_of) == [0, 0, 1, 1, -1]
     q = new[0]
@@ -826,9 +840,8 @@ def test_a_short_first_pass_line_along_a_long_one_is_folded_into_it():
     sub-conductor near a tower) is a stretch of that conductor: one conductor is left, the stub's
     points and span become a wire of it. A line beside it 1 m away, or one as long, stays."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _fold_stubs
+    from toolbox_plugins.powerlines.wire_sets import fold_stubs
 
     ang = np.radians(0.3)
     d2 = np.array([np.cos(ang), np.sin(ang)])
@@ -843,7 +856,7 @@ def test_a_short_first_pass_line_along_a_long_one_is_folded_into_it():
              Span(1, 0, 0, 10.0, 1500.0, 20.0, 0.0, 20.0, 0.03, 40, 0.1),
              Span(2, 0, 0, 250.0, 1500.0, 20.0, 0.0, 500.0, 0.03, 800, 2.0)]
     line_of, wire_of = np.array([0, 0, 1, 1, 2, -1]), np.array([0, 0, 0, 0, 0, -1])
-    lines, geo, spans, line_of, wire_of = _fold_stubs(lines, geo, spans, line_of, wire_of, 1.0, {"band_m": 0.4})
+    lines, geo, spans, line_of, wire_of = fold_stubs(lines, geo, spans, line_of, wire_of, 1.0, {"band_m": 0.4})
     assert len(geo) == len(lines["conductors"]) == 2
     assert list(line_of) == [0, 0, 0, 0, 1, -1] and list(wire_of) == [0, 0, 1, 1, 0, -1]
     assert sorted((sp.conductor, sp.wire) for sp in spans) == [(0, 0), (0, 1), (1, 0)]
@@ -854,7 +867,7 @@ def test_points_of_a_crown_that_line_up_are_no_conductor():
     a catenary through points of a crown that happen to line up does not: the crown's line is
     dropped, the wire kept, even with a crown touching it along a third of its span."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _not_wires
+    from toolbox_plugins.powerlines.stages.rejection import lines_not_wires
 
     rng = np.random.default_rng(4)
     L, z0, c = 40.0, 20.0, 900.0
@@ -865,7 +878,7 @@ def test_points_of_a_crown_that_line_up_are_no_conductor():
     pts = np.vstack([wire, touching, crown])
     geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, L), (np.array([0.0, 10.0]), np.array([1.0, 0.0]), 0.0, L)]
     spans = [Span(0, 0, 0, L / 2, c, z0, 0.0, L, 0.03, 200, 0.2), Span(1, 0, 0, L / 2, c, z0, 0.0, L, 0.1, 25, 0.2)]
-    assert _not_wires(spans, geo, pts[:, 0], pts[:, 1], pts[:, 2], max_rms=0.2) == {1}
+    assert lines_not_wires(spans, geo, pts[:, 0], pts[:, 1], pts[:, 2], max_rms=0.2) == {1}
 
 
 def test_the_top_edge_of_a_wall_is_no_conductor():
@@ -873,7 +886,7 @@ def test_the_top_edge_of_a_wall_is_no_conductor():
     side (Oakland part3_ak): the side is below the height window, so only every point off the
     ground shows it in a surface; wires stacked 0.3 m apart over one another are not a wall."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _not_wires
+    from toolbox_plugins.powerlines.stages.rejection import lines_not_wires
 
     rng = np.random.default_rng(5)
     L, z0 = 10.0, 9.7
@@ -886,8 +899,8 @@ def test_the_top_edge_of_a_wall_is_no_conductor():
     spans = [Span(0, 0, 0, L / 2, 1e6, z0, 0.0, L, 0.01, 67, 0.0), Span(1, 0, 0, L / 2, 1e6, z0, 0.0, L, 0.01, 67, 0.0)]
     cand = np.vstack([top, stacked])  # what the height window keeps
     off_ground = np.vstack([top, side, stacked])
-    assert _not_wires(spans, geo, *cand.T, max_rms=0.2) == set()  # the window alone cannot tell
-    assert _not_wires(spans, geo, *cand.T, max_rms=0.2, below=tuple(off_ground.T)) == {0}
+    assert lines_not_wires(spans, geo, *cand.T, max_rms=0.2) == set()  # the window alone cannot tell
+    assert lines_not_wires(spans, geo, *cand.T, max_rms=0.2, below=tuple(off_ground.T)) == {0}
 
 
 def _segment(rng, a, b, n, noise=0.02):
@@ -920,7 +933,6 @@ def test_straight_wires_neighbourhoods_searched_once_are_those_of_a_fresh_search
     search of the points left finds (same neighbours, same order), so the runs drawn are the
     same as with a search per draw (the fallback where the pairs would not fit in memory)."""
     from scipy.spatial import cKDTree
-
     from toolbox_plugins.powerlines import core
     from toolbox_plugins.powerlines.core import _ball_pairs, _SetNeighbours, straight_wires
 
@@ -1058,7 +1070,7 @@ def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_fac
     wires are held and leads away from them is a short wire; a tower's arm (the end nearer the
     wires is its free tip), a cross arm under the wires (it does not lead away) and a scan row
     of a facade (the next rows around it) are not."""
-    from toolbox_plugins.powerlines.plugin import _short_wires
+    from toolbox_plugins.powerlines.stages.more_wires import short_wire_pass
 
     rng = np.random.default_rng(8)
     pc, label = _short_wire_scene(rng)
@@ -1066,7 +1078,7 @@ def test_short_wires_keep_a_wire_leaving_a_pole_and_drop_arms_cross_arms_and_fac
     steep = np.flatnonzero(np.isin(label, ["pole", "body"]))
     free = np.flatnonzero(np.isin(label, ["across", "arm", "crossarm", "facade_row"]))
     params = {"s_min_m": 8.0, "v_max_m": 2.5}
-    found = _short_wires(pc, free, np.arange(len(pc)), steep, wired, params, 1.0, 1.0, wire_like=label != "facade")
+    found = short_wire_pass(pc, free, np.arange(len(pc)), steep, wired, params, 1.0, 1.0, wire_like=label != "facade")
     assert found is not None
     lines, geo, spans, line_of, wire_of, _ = found
     assert len(geo) == 1 and len(lines["conductors"]) == 1 and len(spans) == 1
@@ -1086,8 +1098,9 @@ def test_short_wires_take_the_wires_stacked_with_one_and_not_a_facade_row_beside
     it are found beside it; a scan row of a facade 1.2 m beside it, as long and as parallel, is
     not taken (the facade's next rows are around it), nor is a roof's eave leaving the pole on
     the other side, though its roof's next rows rising from it are as sparse as wires."""
+    from toolbox_plugins.powerlines.stages.more_wires import short_wire_pass
+
     from toolbox.io.points import PointCloud
-    from toolbox_plugins.powerlines.plugin import _short_wires
 
     rng = np.random.default_rng(3)
     a, b = np.array([20.2, -0.4]), np.array([20.8, -6.5])
@@ -1116,7 +1129,7 @@ def test_short_wires_take_the_wires_stacked_with_one_and_not_a_facade_row_beside
     pc = PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2])
     searched = np.flatnonzero(np.isin(label, ["top", "middle", "low_searched", "facade_row", "eave"]))
     free = np.r_[searched, np.flatnonzero(label == "low_loose")]
-    found = _short_wires(pc, free, np.arange(len(pc)), np.flatnonzero(label == "pole"), np.flatnonzero(label == "main"),
+    found = short_wire_pass(pc, free, np.arange(len(pc)), np.flatnonzero(label == "pole"), np.flatnonzero(label == "main"),
                          {"s_min_m": 8.0, "v_max_m": 2.5}, 1.0, 1.0, n_searched=len(searched),
                          wire_like=label != "facade")
     assert found is not None
@@ -1136,8 +1149,9 @@ def test_short_wires_seen_over_less_than_the_minimum_length_as_a_stack():
     """Cables from a pole top to a house, one over another 0.8 m apart, seen over 3 m only (less
     than the search's S_min / 2 = 4 m): together they are wires, each one found; a single
     3 m run leaving another pole alone is not (one run that short is any edge)."""
+    from toolbox_plugins.powerlines.stages.more_wires import short_wire_pass
+
     from toolbox.io.points import PointCloud
-    from toolbox_plugins.powerlines.plugin import _short_wires
 
     rng = np.random.default_rng(5)
     main = np.vstack([_segment(rng, (0, y, 8.0), (100, y, 8.0), 400) for y in (-1.0, 0.0, 1.0)])
@@ -1150,7 +1164,7 @@ def test_short_wires_seen_over_less_than_the_minimum_length_as_a_stack():
     label = np.concatenate([[k] * len(v) for k, v in parts.items()])
     pc = PointCloud(xyz[:, 0], xyz[:, 1], xyz[:, 2])
     free = np.flatnonzero(np.char.startswith(label.astype(str), "cable") | (label == "alone"))
-    found = _short_wires(pc, free, np.arange(len(pc)), np.flatnonzero(np.isin(label, ["pole", "pole2"])),
+    found = short_wire_pass(pc, free, np.arange(len(pc)), np.flatnonzero(np.isin(label, ["pole", "pole2"])),
                          np.flatnonzero(label == "main"), {"s_min_m": 8.0, "v_max_m": 2.5}, 1.0, 1.0,
                          wire_like=np.ones(len(pc), bool))
     assert found is not None
@@ -1209,9 +1223,8 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
     data), an arm within the tower's own extent is still one; a wire of a pole 2 m across that
     leaves it and ends 6 m away (a wire across the street) is not."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Pylon
-    from toolbox_plugins.powerlines.plugin import _arms
+    from toolbox_plugins.powerlines.stages.supports import arm_lines
 
     def tower(x, y, half):
         grid = (0.0, 0.0, 1.0, 200, 200)
@@ -1223,31 +1236,31 @@ def test_arms_of_a_tower_with_or_without_its_line_found():
     arm_across = LineString([(50, 48), (50, 44)])  # its cells reach 5.9 m from the centre
     street = LineString([(150, 51), (150, 57)])  # from the pole across the street
     cond = gpd.GeoDataFrame({"conductor": range(4)}, geometry=[line, arm_across, street, LineString([(51, 52), (51, 56)])])
-    assert _arms(cond, [big, pole], 1.0) == {1, 3}
+    assert arm_lines(cond, [big, pole], 1.0) == {1, 3}
     # the line found past the tower: the arm crosses it (the rule with the 10 m reach)
     cond2 = gpd.GeoDataFrame({"conductor": range(2)}, geometry=[LineString([(0, 50), (100, 50)]),
                                                                  LineString([(52, 41), (52, 51)])])
-    assert _arms(cond2, [big], 1.0) == {1}
-    assert _arms(cond2, [], 1.0) == set()
+    assert arm_lines(cond2, [big], 1.0) == {1}
+    assert arm_lines(cond2, [], 1.0) == set()
     # which towers hold arms; with own_only (a structure the wires run through) only a line that
     # never leaves its own extent is an arm, not one crossing the line within the 10 m reach
     held = []
-    assert _arms(cond, [big, pole], 1.0, with_arms=held) == {1, 3} and held == [0]
+    assert arm_lines(cond, [big, pole], 1.0, with_arms=held) == {1, 3} and held == [0]
     cond3 = gpd.GeoDataFrame({"conductor": range(3)}, geometry=[LineString([(0, 50), (100, 50)]),
                                                                  LineString([(52, 41), (52, 51)]),
                                                                  LineString([(51, 47), (51, 53)])])
-    assert _arms(cond3, [big], 1.0) == {1, 2}
+    assert arm_lines(cond3, [big], 1.0) == {1, 2}
     held = []
-    assert _arms(cond3, [big], 1.0, with_arms=held, own_only=True) == {2} and held == [0]
+    assert arm_lines(cond3, [big], 1.0, with_arms=held, own_only=True) == {2} and held == [0]
     # a Hough line across the tower drawn 60 m long through the wires' crossings beside it, whose
     # only fitting span is the tower's cross-arm (bundle3_d30 seed 6): its wire's ends decide
     cond4 = gpd.GeoDataFrame({"conductor": range(2)}, geometry=[LineString([(0, 50), (100, 50)]),
                                                                  LineString([(51, 20), (51, 80)])])
-    assert _arms(cond4, [big], 1.0) == set()
+    assert arm_lines(cond4, [big], 1.0) == set()
     arm_ends = [None, np.array([[51.0, 46.0], [51.0, 55.0]])]
-    assert _arms(cond4, [big], 1.0, wire_ends=arm_ends) == {1}
+    assert arm_lines(cond4, [big], 1.0, wire_ends=arm_ends) == {1}
     # a wire of its own there, fitted 30 m past the tower, stays a conductor
-    assert _arms(cond4, [big], 1.0, wire_ends=[None, np.array([[51.0, 46.0], [51.0, 80.0]])]) == set()
+    assert arm_lines(cond4, [big], 1.0, wire_ends=[None, np.array([[51.0, 46.0], [51.0, 80.0]])]) == set()
 
 
 def test_a_tower_stands_under_its_lines_and_a_tree_beside_them_does_not():
@@ -1812,7 +1825,7 @@ def test_a_span_through_a_crown_on_a_line_with_wires_is_crowded():
     on its own, no denser within 0.1 m than around it: it is listed as crowded and the line,
     whose wire stands out, is kept."""
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _not_wires
+    from toolbox_plugins.powerlines.stages.rejection import lines_not_wires
 
     rng = np.random.default_rng(6)
     L, z0, c = 40.0, 20.0, 900.0
@@ -1823,7 +1836,7 @@ def test_a_span_through_a_crown_on_a_line_with_wires_is_crowded():
     geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, L)]
     spans = [Span(0, 0, 0, L / 2, c, z0, 0.0, L, 0.03, 300, 0.2), Span(0, 1, 0, L / 2, c, z0 - 2.0, 0.0, L, 0.05, 40, 0.2)]
     crowded = []
-    assert _not_wires(spans, geo, *pts.T, max_rms=0.2, crowded=crowded) == set()
+    assert lines_not_wires(spans, geo, *pts.T, max_rms=0.2, crowded=crowded) == set()
     assert crowded == [1]
 
 
@@ -2147,9 +2160,8 @@ def test_a_line_leaning_off_its_wire_turns_onto_the_wires_trend(pieces, turned):
     fitted spans measure (about their middle, onto the offset of most of their points); a drift
     within band_m or within the spans' noise, or spans that disagree, leave it as it was."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _realign
+    from toolbox_plugins.powerlines.plan_geometry import realign
 
     slope = pieces[0][4]
     # each piece lies on one wire: 0.5 m across at s = 0, drifting by its slope
@@ -2160,7 +2172,7 @@ def test_a_line_leaning_off_its_wire_turns_onto_the_wires_trend(pieces, turned):
                                             geometry=[LineString([(0, 0), (100, 0)])]),
              "conductor_segments": gpd.GeoDataFrame({"conductor": [0]}, geometry=[LineString([(10, 0), (60, 0)])])}
     params = {"max_rms_3d_m": 0.2, "s_min_m": 8.0, "band_m": 0.4}
-    lines2, geo2, n = _realign(lines, geo, spans, params, 1.0)
+    lines2, geo2, n = realign(lines, geo, spans, params, 1.0)
     assert n == int(turned)
     if not turned:
         assert geo2 is geo and lines2 is lines
@@ -2178,14 +2190,14 @@ def test_a_line_leaning_off_its_wire_turns_onto_the_wires_trend(pieces, turned):
 
 
 def test_a_second_pass_line_along_a_found_one_is_not_another_conductor():
-    from toolbox_plugins.powerlines.plugin import _along
+    from toolbox_plugins.powerlines.wire_sets import runs_along
 
     h = (np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 100.0)
     d = np.array([np.cos(np.radians(0.3)), np.sin(np.radians(0.3))])
-    assert _along((np.array([20.0, 0.1]), d, 0.0, 30.0), h, 0.4)  # the rest of its points
-    assert not _along((np.array([20.0, 0.6]), d, 0.0, 30.0), h, 0.4)  # a conductor beside it
+    assert runs_along((np.array([20.0, 0.1]), d, 0.0, 30.0), h, 0.4)  # the rest of its points
+    assert not runs_along((np.array([20.0, 0.6]), d, 0.0, 30.0), h, 0.4)  # a conductor beside it
     bend = np.array([np.cos(np.radians(4.0)), np.sin(np.radians(4.0))])
-    assert not _along((np.array([100.0, 0.0]), bend, 0.0, 40.0), h, 0.4)  # past a bend
+    assert not runs_along((np.array([100.0, 0.0]), bend, 0.0, 40.0), h, 0.4)  # past a bend
 
 
 def test_catenary_fit_minimises_the_soft_l1_cost_as_scipy_does():
@@ -2345,7 +2357,6 @@ def test_ribbons_are_wires_not_roofs():
     """Three lines 0.6 m apart (a ribbon of phases), locally flat like a roof; a cross arm joins
     them at one end. A roof strip of the same size and density is no ribbon."""
     from scipy.spatial import cKDTree
-
     from toolbox_plugins.powerlines.core import ribbons
 
     rng = np.random.default_rng(3)
@@ -2368,7 +2379,6 @@ def test_a_stack_of_cables_is_a_ribbon_a_facade_and_a_terraced_roof_are_not():
     space between them; a wall strip of the same size fills its height, and a roof of two flat
     terraces 0.5 m apart is wide in plan."""
     from scipy.spatial import cKDTree
-
     from toolbox_plugins.powerlines.core import ribbons
 
     rng = np.random.default_rng(5)
@@ -2413,7 +2423,6 @@ def test_a_ribbon_linked_to_a_crown_is_a_ribbon_where_it_runs_alone():
     """The same ribbon with a crown grown into it at one place: the linked set is no ribbon as a
     whole, but judged piece by piece along it every piece away from the crown is."""
     from scipy.spatial import cKDTree
-
     from toolbox_plugins.powerlines.core import ribbons
 
     rng = np.random.default_rng(4)
@@ -3131,21 +3140,21 @@ def test_a_line_ending_at_a_support_crosses_nothing_past_it():
     pole = [(50.0, -2.5, 3.0)]
     for b_end, supports, n in ((-2.0, None, 1), (-2.0, pole, 0), (-0.8, pole, 1), (20.0, pole, 1)):
         seg_b = [(np.array([50.0, -50.0]), np.array([50.0, b_end]))]
-        got = crossings([a, b], [seg_a, seg_b], supports=supports)
+        got = crossings_at_supports([a, b], [seg_a, seg_b], supports=supports)
         assert len(got) == n, (b_end, supports, got)
     # a support that is not at the line's end (30 m along it) changes nothing
     seg_b = [(np.array([50.0, -50.0]), np.array([50.0, -2.0]))]
-    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, -30.0, 3.0)])) == 1
+    assert len(crossings_at_supports([a, b], [seg_a, seg_b], supports=[(50.0, -30.0, 3.0)])) == 1
     # b's wire seen up to 3 m short of its pole (next to the structure): a line passing 1 m before
     # the pole crosses it; one passing within the strain insulator's 0.5 m of the pole does not
-    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, 1.0, 3.5)])) == 1
-    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, 0.3, 3.5)])) == 0
+    assert len(crossings_at_supports([a, b], [seg_a, seg_b], supports=[(50.0, 1.0, 3.5)])) == 1
+    assert len(crossings_at_supports([a, b], [seg_a, seg_b], supports=[(50.0, 0.3, 3.5)])) == 0
     # b's wire seen up to its pole (0.4 m past the pole's centre as found): it ends there, and a
     # line 0.9 m past that end, 1.3 m past the pole, does not cross it (the synthetic mobile
     # stacked circuits, seed 3); one 0.3 m past the pole does
     seg_b = [(np.array([50.0, -50.0]), np.array([50.0, -0.9]))]
-    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, -1.3, 3.0)])) == 0
-    assert len(crossings([a, b], [seg_a, seg_b], supports=[(50.0, -0.3, 3.0)])) == 1
+    assert len(crossings_at_supports([a, b], [seg_a, seg_b], supports=[(50.0, -1.3, 3.0)])) == 0
+    assert len(crossings_at_supports([a, b], [seg_a, seg_b], supports=[(50.0, -0.3, 3.0)])) == 1
 
 
 def test_lines_that_both_end_at_a_support_do_not_cross_there():
@@ -3161,9 +3170,9 @@ def test_lines_that_both_end_at_a_support_do_not_cross_there():
     lines = [(meet - 100 * d1, d1), (meet + 0.5 * d2, d2)]
     tower = (2.5, 0.0, 6.0)  # its centre 2.5 m beside where they meet, reaching 6 m
     assert len(crossings(lines, [seg1, seg2])) == 1
-    assert len(crossings(lines, [seg1, seg2], supports=[tower])) == 0
+    assert len(crossings_at_supports(lines, [seg1, seg2], supports=[tower])) == 0
     # each ending at a support of its own (two poles 9 m apart, either side of where they meet)
-    assert len(crossings(lines, [seg1, seg2], supports=[(-3.0, -4.0, 4.6), (3.0, 4.0, 4.6)])) == 1
+    assert len(crossings_at_supports(lines, [seg1, seg2], supports=[(-3.0, -4.0, 4.6), (3.0, 4.0, 4.6)])) == 1
 
 
 def test_a_circuit_ends_where_its_conductors_end_together_and_reaches_as_far_as_its_longest():
@@ -3173,7 +3182,7 @@ def test_a_circuit_ends_where_its_conductors_end_together_and_reaches_as_far_as_
     edge are not (the lines run on out of the survey). A wire of B seen 3.8 m short of its
     sibling's end, beside line A's pole (mobile_dist seed 5: 2 crossings missed), reaches on as
     far as its sibling."""
-    from toolbox_plugins.powerlines.plugin import _circuit_ends, _circuit_reach
+    from toolbox_plugins.powerlines.stages.layers import circuit_ends, circuit_reach
 
     u = np.array([0.0, 1.0])
     b_lines = [(np.array([x, 0.0]), u) for x in (48.0, 50.0, 52.0)]
@@ -3181,14 +3190,14 @@ def test_a_circuit_ends_where_its_conductors_end_together_and_reaches_as_far_as_
     a_far = (np.array([0.0, 62.0]), np.array([1.0, 0.0]))  # 2 m past B's ends
     a_seg = [[(np.array([0.0, 62.0]), np.array([100.0, 62.0]))]]
     bounds = (0.0, -10.0, 100.0, 100.0)  # B enters the survey at its edge
-    ends = _circuit_ends(b_lines + [a_far], b_checks + a_seg, bounds)
+    ends = circuit_ends(b_lines + [a_far], b_checks + a_seg, bounds)
     assert len(ends) == 1 and abs(ends[0][0] - 50.0) < 1e-9 and abs(ends[0][1] - 60.0) < 0.5
     assert len(crossings(b_lines + [a_far], b_checks + a_seg)) == 3  # the 5 m extension
-    assert len(crossings(b_lines + [a_far], b_checks + a_seg, supports=ends)) == 0
+    assert len(crossings_at_supports(b_lines + [a_far], b_checks + a_seg, supports=ends)) == 0
     # at the data's edge (y = 63) their ends are where the survey stops, not a support
-    assert _circuit_ends(b_lines + [a_far], b_checks + a_seg, (0.0, -10.0, 100.0, 63.0)) == []
+    assert circuit_ends(b_lines + [a_far], b_checks + a_seg, (0.0, -10.0, 100.0, 63.0)) == []
     # one wire alone ending there is no circuit's end
-    assert _circuit_ends(b_lines[:1] + [a_far], b_checks[:1] + a_seg, bounds) == []
+    assert circuit_ends(b_lines[:1] + [a_far], b_checks[:1] + a_seg, bounds) == []
 
     # B's wire at x = 50 seen to y = 56.2, its sibling 2.4 m beside it to y = 60; line A's pole
     # at (49.6, 58.2) beside its end: A's wire at y = 58.6 crosses it 2.4 m past its seen end
@@ -3197,15 +3206,15 @@ def test_a_circuit_ends_where_its_conductors_end_together_and_reaches_as_far_as_
     a_wire = (np.array([0.0, 58.6]), np.array([1.0, 0.0]))
     a_chk = [[(np.array([0.0, 58.6]), np.array([100.0, 58.6]))]]
     pole = [(49.6, 58.2, 3.0)]
-    assert len(crossings(pair + [a_wire], short + a_chk, supports=pole)) == 1  # the sibling's only
-    reach = _circuit_reach(pair + [a_wire], short + a_chk)
-    assert len(crossings(pair + [a_wire], reach, supports=pole)) == 2
+    assert len(crossings_at_supports(pair + [a_wire], short + a_chk, supports=pole)) == 1  # the sibling's only
+    reach = circuit_reach(pair + [a_wire], short + a_chk)
+    assert len(crossings_at_supports(pair + [a_wire], reach, supports=pole)) == 2
     # a sibling ending over max_m farther, or over across_m beside it, carries nothing
     far = [short[0], [(np.array([52.4, 0.0]), np.array([52.4, 62.0]))]]
-    assert _circuit_reach(pair, far)[0] == far[0]
+    assert circuit_reach(pair, far)[0] == far[0]
     wide = [(np.array([50.0, 0.0]), u), (np.array([53.5, 0.0]), u)]
     apart = [short[0], [(np.array([53.5, 0.0]), np.array([53.5, 60.0]))]]
-    assert _circuit_reach(wide, apart)[0] == apart[0]
+    assert circuit_reach(wide, apart)[0] == apart[0]
 
 
 def test_false_crossings_are_those_far_from_every_true_one():
@@ -3514,7 +3523,6 @@ def test_surface_density_rule_counts_the_points_within_one_metre(density):
     """Planar and rugged neighbourhoods must hold half the survey's density within radius 1 (a
     count of the ball, its definition); shape_classes decides it from nearest-neighbour distances."""
     from scipy.spatial import cKDTree
-
     from toolbox_plugins.powerlines.core import shape_classes
 
     rng = np.random.default_rng(4)
@@ -3800,13 +3808,13 @@ def test_a_short_stub_runs_along_a_line_its_ends_lie_on():
     """A 9.5 m stub the Hough leant 1.4 deg off its wire runs along the long line both its ends
     lie within band_m of (its angle is loose over that length); a 30 m line at that angle, its
     ends as close, crosses it."""
-    from toolbox_plugins.powerlines.plugin import _along
+    from toolbox_plugins.powerlines.wire_sets import runs_along
 
     h = (np.array([-100.0, 0.0]), np.array([1.0, 0.0]), 0.0, 600.0)
     d = np.array([np.cos(np.radians(1.4)), np.sin(np.radians(1.4))])
-    assert _along((np.array([0.0, -0.1]), d, 0.0, 9.5), h, 0.4)
-    assert not _along((np.array([0.0, -0.36]), d, 0.0, 30.0), h, 0.4)
-    assert not _along((np.array([0.0, 0.3]), d, 0.0, 9.5), h, 0.4)  # its far end 0.53 m off
+    assert runs_along((np.array([0.0, -0.1]), d, 0.0, 9.5), h, 0.4)
+    assert not runs_along((np.array([0.0, -0.36]), d, 0.0, 30.0), h, 0.4)
+    assert not runs_along((np.array([0.0, 0.3]), d, 0.0, 9.5), h, 0.4)  # its far end 0.53 m off
 
 
 def test_a_wire_running_into_a_crown_is_thin_across_and_a_crowns_edge_is_not():
@@ -3841,23 +3849,22 @@ def test_a_line_between_a_ribbons_phases_settles_on_its_own_wire():
     wire over 500 m (under band_m) and holds pieces of the next phase: the spans of its main wire
     settle it at a quarter band_m; the other phase's pieces, trending the other way, do not."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Span
-    from toolbox_plugins.powerlines.plugin import _main_wire_spans, _realign
+    from toolbox_plugins.powerlines.plan_geometry import main_wire_spans, realign
 
     slope = -0.0005  # the main wire's offset, 0.1 m at s = 0, across the line along it
     main = [Span(0, 0, k, s0 + 50.0, 900.0, 10.0, s0, s0 + 100.0, 0.03, 200, 1.4, 0.1, slope, 0.03)
             for k, s0 in enumerate(range(0, 500, 100))]
     other = [Span(0, 1, k, s0 + 50.0, 900.0, 10.0, s0, s0 + 60.0, 0.03, 60, 0.5, 0.4, 0.001, 0.03)
              for k, s0 in enumerate((0, 200))]
-    assert _main_wire_spans(main + other, 0.2) == main
+    assert main_wire_spans(main + other, 0.2) == main
     geo = [(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 0.0, 500.0)]
     lines = {"conductors": gpd.GeoDataFrame({"conductor": [0], "azimuth_deg": [90.0]},
                                             geometry=[LineString([(0, 0), (500, 0)])]),
              "conductor_segments": gpd.GeoDataFrame({"conductor": [0]}, geometry=[LineString([(0, 0), (500, 0)])])}
     params = {"max_rms_3d_m": 0.2, "s_min_m": 8.0, "band_m": 0.4}
-    assert _realign(lines, geo, main, params, 1.0)[2] == 0  # within band_m: the band holds its wire
-    lines2, geo2, n = _realign(lines, geo, _main_wire_spans(main + other, 0.2), params, 1.0, min_drift_m=0.1)
+    assert realign(lines, geo, main, params, 1.0)[2] == 0  # within band_m: the band holds its wire
+    lines2, geo2, n = realign(lines, geo, main_wire_spans(main + other, 0.2), params, 1.0, min_drift_m=0.1)
     assert n == 1
     for (x, y) in lines2["conductors"].geometry[0].coords:  # on the main wire at both ends
         assert abs(y - (0.1 + slope * x)) < 0.01
@@ -3868,15 +3875,14 @@ def test_a_line_crosses_where_its_wire_points_reach_past_its_hough_extent():
     again near its pole, taken by the growth); its wire points reach over A: the crossing is
     there. Without them it is not."""
     from shapely.geometry import LineString
-
-    from toolbox_plugins.powerlines.plugin import _crossings_of
+    from toolbox_plugins.powerlines.stages.layers import crossings_layer
 
     cond = gpd.GeoDataFrame({"conductor": [0, 1]}, geometry=[LineString([(0, 0), (100, 0)]),
                                                              LineString([(50, -40), (50, -7)])])
     segs = gpd.GeoDataFrame({"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([]))
-    assert len(_crossings_of(cond, segs, "extent", 1.0)) == 0
+    assert len(crossings_layer(cond, segs, "extent", 1.0)) == 0
     reach = [None, (np.array([50.0, -40.0]), np.array([50.0, 3.0]))]
-    got = _crossings_of(cond, segs, "extent", 1.0, wire_reach=reach)
+    got = crossings_layer(cond, segs, "extent", 1.0, wire_reach=reach)
     assert len(got) == 1 and got.geometry[0].distance(gpd.points_from_xy([50.0], [0.0])[0]) < 1e-6
 
 
@@ -3885,9 +3891,8 @@ def test_wire_points_on_a_found_support_carry_a_line_to_it_not_past_it():
     top (mobile_stacked seed 1): A passes beside the pole, no crossing. With the pole 0.33 m past
     A (mobile_stacked seed 9) B's wire runs over A to it: a crossing."""
     from shapely.geometry import LineString
-
     from toolbox_plugins.powerlines.core import Pylon
-    from toolbox_plugins.powerlines.plugin import _crossings_of
+    from toolbox_plugins.powerlines.stages.layers import crossings_layer
 
     def pole(x, y):
         return Pylon(x, y, 11.0, 3, 90.0, np.array([0]), (x - 0.5, y - 0.5, 1.0, 1, 1), kind="pole")
@@ -3896,9 +3901,9 @@ def test_wire_points_on_a_found_support_carry_a_line_to_it_not_past_it():
                                                              LineString([(50, -40), (50, -3)])])
     segs = gpd.GeoDataFrame({"conductor": np.array([], np.int64)}, geometry=gpd.GeoSeries([]))
     past = [None, (np.array([50.0, -40.0]), np.array([50.0, 0.05]))]
-    assert len(_crossings_of(cond, segs, "extent", 1.0, found=[pole(50.0, -0.35)], wire_reach=past)) == 0
+    assert len(crossings_layer(cond, segs, "extent", 1.0, found=[pole(50.0, -0.35)], wire_reach=past)) == 0
     over = [None, (np.array([50.0, -40.0]), np.array([50.0, 0.4]))]
-    got = _crossings_of(cond, segs, "extent", 1.0, found=[pole(50.0, 0.33)], wire_reach=over)
+    got = crossings_layer(cond, segs, "extent", 1.0, found=[pole(50.0, 0.33)], wire_reach=over)
     assert len(got) == 1 and got.geometry[0].distance(gpd.points_from_xy([50.0], [0.0])[0]) < 1e-6
 
 

@@ -7,11 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 
-# how far short of its support's centre a wire ending there stops in plan (a dead-end string of
-# insulators holds it off the arm)
-STRAIN_INSULATOR_M = 0.5
-
-
 def intersect(p1, d1, p2, d2):
     """Intersection of two infinite lines (point, direction); None when (nearly) parallel."""
     cross = d1[0] * d2[1] - d1[1] * d2[0]
@@ -23,61 +18,24 @@ def intersect(p1, d1, p2, d2):
 
 
 def crossings(lines, segments, extend_m: float = 5.0, tolerance_m: float = 1.0, merge_m: float = 1.0,
-              supports=None, beyond_m: float = 1.0):
+              excluded=None):
     """Crossings of conductor lines (the method's §5): pairwise intersections of the fitted lines,
     kept where some pair of validated segments (each extended by ``extend_m``) also intersects
     within ``tolerance_m``; where several lines meet (every pair of them crossing within ``merge_m``)
     their crossings are averaged.
 
-    ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). With ``supports``
-    [(x, y, reach_m)] (towers and poles found), an intersection more than ``beyond_m`` past the
-    end of a line's segments, where that end is within a support's reach, and within
-    STRAIN_INSULATOR_M of that support or past it, is not a crossing: the line ends at the support
-    (the method's crossings are not pylon positions), and the extension would carry it on to the
-    line beside the pole; where that end lies within STRAIN_INSULATOR_M of the support along the
-    line, nothing more than STRAIN_INSULATOR_M past the support is; nor is one of two lines that
-    both end at a support, within its reach.
+    ``lines``: [(anchor, direction)], ``segments``: per line a list of (a, b). ``excluded``
+    (optional), ``excluded(i, j, point) -> bool``: an intersection of lines i and j the caller's
+    domain rules out (the power lines': past a line's end at a support).
     Returns a list of dicts (x, y, n_lines, angle_deg, lines).
     """
-    sup = np.asarray([s_[:2] for s_ in supports], float).reshape(-1, 2) if supports else np.zeros((0, 2))
-    sup_reach = np.asarray([s_[2] for s_ in supports], float) if supports else np.zeros(0)
-    # per line, how far along it each end at a support reaches: beyond_m past its segments, or up
-    # to the support less a strain insulator (the wire runs on to its arm, unseen over the last
-    # metres next to the structure, and a line crossing there crosses it)
-    extents = []
-    for (a, d), segs in zip(lines, segments) if len(sup) else ():
-        a, d = np.asarray(a, float), np.asarray(d, float)
-        t = np.array([(np.asarray(e, float) - a) @ d for seg in segs for e in seg]) if len(segs) else np.zeros(1)
-        lim, ends_at = [], set()
-        for t_end, side in ((t.min(), -1.0), (t.max(), 1.0)):
-            near = np.flatnonzero(np.hypot(*(sup - (a + t_end * d)).T) <= sup_reach) if len(segs) else []
-            if len(near):
-                at = float(np.max(side * ((sup[near] - a) @ d)))  # the farthest support, along the line
-                reach = max(side * t_end + beyond_m, at - STRAIN_INSULATOR_M)
-                if abs(side * t_end - at) <= STRAIN_INSULATOR_M:
-                    # its wire seen up to the support: it ends there, not a metre past it
-                    reach = max(side * t_end, at + STRAIN_INSULATOR_M)
-            lim.append(None if not len(near) else side * reach)
-            ends_at.update(int(k) for k in near)
-        extents.append((a, d, lim, ends_at))
-
-    def ends_at_support(k, p):
-        a, d, (lim0, lim1), _ = extents[k]
-        t = (p - a) @ d
-        return (lim0 is not None and t < lim0) or (lim1 is not None and t > lim1)
-
-    def turns_at_support(i, j, p):
-        # both end at one support and meet within its reach: one line's wires turning there (an
-        # angle tower), or its arms
-        return any(np.hypot(*(sup[k] - p)) <= sup_reach[k] for k in extents[i][3] & extents[j][3])
-
     found = []
     for i in range(len(lines)):
         for j in range(i + 1, len(lines)):
             p = intersect(lines[i][0], lines[i][1], lines[j][0], lines[j][1])
             if p is None:
                 continue
-            if len(sup) and (ends_at_support(i, p) or ends_at_support(j, p) or turns_at_support(i, j, p)):
+            if excluded is not None and excluded(i, j, p):
                 continue
             ok = False
             for a1, b1 in segments[i]:

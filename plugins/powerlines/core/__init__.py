@@ -1,0 +1,152 @@
+"""Power-line pre-classification and the 3D conductor step (pure numpy/scipy).
+
+* ``shape_classes``: eigenvalue shape of each candidate's neighbourhood: linear (wires),
+  planar (roofs: a flat 2D patch) or rugged (vegetation: volumetric scatter). It stands in for the
+  planar/rugged pre-classification the method ran in LAStools.
+* ``conductors_3d``: beyond the method's 2D limit — the 3D points near a 2D line are split by
+  height and continuity (so wires stacked in plan come apart), each wire into spans at its
+  attachment points (the highest points between sags), and a catenary
+  z = z0 + c·(cosh((s - s0)/c) - 1) is fitted per span in its vertical plane; where one does
+  not fit (wires stacked closer than the height link, clutter linked to a wire),
+  ``peel_catenaries`` takes them out one at a time.
+* ``short_wires``: wires seen over a few metres only (a mobile scan's wires across the street),
+  straight 3D runs that leave the wires found at a support.
+"""
+
+# the topics (each module's own docstring says what it holds); every name is re-exported here,
+# so the stages read ``from ..core import X`` whatever module X lives in
+from .bundles import (  # noqa: F401
+    WINDOWED_SPLIT_M,
+    _across_wires,
+    _chain_pieces,
+    _clean_cut,
+    _clean_groups,
+    _height_residual,
+    _split_bundles,
+    _two_means_1d,
+    _windowed_groups,
+)
+from .candidates import (  # noqa: F401
+    DENSITY_BLOCK_M,
+    MAX_DENSITY_NEIGHBOURS,
+    _bands,
+    _is_ribbon,
+    _linked_sets,
+    _pieces_along,
+    _theil_sen_slope,
+    height_window_top,
+    local_surface_density,
+    ribbons,
+    shape_classes,
+    tubes,
+)
+from .catenaries import (  # noqa: F401
+    ISOLATION_M,
+    MAX_NEIGHBOUR_PAIRS,
+    N_BEST_LINES,
+    SIDE_BY_SIDE_MIN_GAP_M,
+    SURFACE_CONTRAST,
+    WIDE_GAP_LINKS,
+    WIRE_HEIGHT_RMS_M,
+    WIRE_ID_BASE,
+    WIRE_LATERAL_FLOOR_M,
+    WIRE_LATERAL_RMS_M,
+    Span,
+    catenary,
+    fit_catenary,
+    kink_cut,
+    line_fit,
+    median_line_fit,
+    parabola_fit,
+    split_spans,
+)
+from .clutter import (  # noqa: F401
+    _contrast,
+    _on_spans,
+    _span_frame,
+    _wires_and_around,
+    along_a_surface,
+    core_and_ring,
+    core_and_ring_masks,
+    core_ring_contrast,
+    in_a_surface,
+    in_foliage,
+    off_their_spans,
+)
+from .short_wires import (  # noqa: F401
+    _alone_in_its_plane,
+    _along_axis,
+    _Around,
+    _ball_pairs,
+    _best_straight_run,
+    _joins,
+    _leads_from_pole,
+    _on_axis,
+    _refined_run,
+    _run_along,
+    _SetNeighbours,
+    _stacks,
+    _stands_alone,
+    short_wires,
+    sibling_wires,
+    straight_wires,
+    wires_from_poles,
+)
+from .spans import (  # noqa: F401
+    _clumped,
+    _pieces_on_surfaces,
+    _robust_trend,
+    _span_ends,
+    _spans_by_line,
+    _stacked_at,
+    bridge_gaps,
+    grow_span_ends,
+    next_spans,
+    points_on_spans,
+    span_on_surface,
+    wire_point_spacing,
+)
+from .supports import (  # noqa: F401
+    Pylon,
+    _axis_share,
+    _base_cells,
+    _grow_body,
+    _parallel,
+    _passes,
+    _point_segment_distance,
+    _pole_pair,
+    _shaped_bodies,
+    _tower_grid,
+    _tower_shaped,
+    _under_its_lines,
+    _wires_over_cells,
+    find_poles,
+    find_pylons,
+    find_towers_passed_through,
+    in_pole_columns,
+    pylon_points,
+)
+from .wires_3d import (  # noqa: F401
+    _local_triples,
+    _longest_run,
+    _pick_up,
+    _refined_trend,
+    _ribbon_group,
+    _runs,
+    _same_wire,
+    _span,
+    _stands_clear,
+    _whole_sparse_wire,
+    alone_beside_wires,
+    band_owner,
+    conductors_3d,
+    peel_catenaries,
+    ribbon_lines,
+    span_in_frame,
+    thin_across,
+    twin_lines,
+)
+from .support_ends import (  # noqa: F401
+    STRAIN_INSULATOR_M,
+    ends_at_supports,
+)
