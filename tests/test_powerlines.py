@@ -950,7 +950,7 @@ def test_straight_wires_neighbourhoods_searched_once_are_those_of_a_fresh_search
     wires = [_segment(rng, (0, 0, 8.0), (0.5, -5.5, 8.1), 40), _segment(rng, (0, 0, 8.7), (-1.5, -5.0, 8.6), 40)]
     xyz = np.vstack(wires + [rng.uniform([-4, 0, 6], [4, 6, 11], (1000, 3))])
     once = straight_wires(xyz, 4.0, 2.5)
-    monkeypatch.setattr(core, "MAX_NEIGHBOUR_PAIRS", 0)
+    monkeypatch.setattr(core.missed_wires, "MAX_NEIGHBOUR_PAIRS", 0)  # where straight_wires reads it
     each = straight_wires(xyz, 4.0, 2.5)
     assert len(once) == 2 and len(once) == len(each) and all(np.array_equal(a, b) for a, b in zip(once, each))
 
@@ -1510,7 +1510,7 @@ def test_tubes_make_a_square_bundle_wire_like_and_leave_a_crown(monkeypatch):
     # without the tube rule most of the bundle is volumetric, and the crown is as it was
     import toolbox_plugins.powerlines.core as core
 
-    monkeypatch.setattr(core, "tubes", lambda xyz, *a, **k: np.zeros(len(xyz), bool))
+    monkeypatch.setattr(core.candidates, "tubes", lambda xyz, *a, **k: np.zeros(len(xyz), bool))
     linear0, _, rugged0, steep0 = shape_classes(xyz - xyz.min(axis=0), surface_density=12.0)
     assert (linear0 | steep0)[:n].mean() < 0.7
     assert np.array_equal(rugged0[n:], rugged[n:])

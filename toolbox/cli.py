@@ -40,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(sp)
 
     sp = sub.add_parser("help", help="parameters, inputs, outputs and reference of an algorithm")
+    sp.add_argument("--markdown", action="store_true", help="the inputs, outputs and parameters as Markdown tables")
     sp.add_argument("algorithm")
     sp.add_argument("--json", action="store_true", help="machine-readable output")
     _common(sp)
@@ -134,6 +135,11 @@ def cmd_help(args) -> int:
     alg = registry().get(args.algorithm)
     if args.json:
         print(json.dumps(alg.to_dict(), indent=2, default=str))
+        return 0
+    if args.markdown:
+        from .docs import markdown
+
+        print(markdown(alg), end="")
         return 0
     wrap = lambda s, ind="    ": textwrap.fill(s, 100, initial_indent=ind, subsequent_indent=ind)  # noqa: E731
     print(f"{alg.id} — {alg.title}")

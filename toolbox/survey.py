@@ -874,18 +874,59 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
                tile_size_m: float, buffer_m: float | None = None, workers: int | None = None, scheduler=None,
                outputs: Mapping[str, str] | None = None, overwrite: bool = False, crs: str | None = None,
                reg=None) -> dict:
-    """Run one algorithm over ``inputs`` (files, folders, globs) as one survey, tile by tile.
+    """Run one algorithm over ``inputs`` (files, folders, globs) as one survey, tile by tile:
+    ``plan_survey`` (catalog, tiles, manifest, tasks), ``execute_survey`` (the tiles on a local pool
+    or a Dask cluster), ``merge_survey`` (the tiles' outputs into the survey's), as lidR's catalog
+    engine separates them.
 
     ``scheduler``: a dask.distributed address (``tcp://host:8786``) or Client; otherwise a local
     pool of ``workers`` processes (default: all cores). Returns the report (as ``--json`` prints);
     ``report["n_failed"]`` says whether any tile failed (then nothing is merged).
     """
-    from .io.atomic import check_writable
     from .registry import registry
 
     t_start = time.perf_counter()
     reg = reg or registry()
-    alg = reg.get(algorithm_id)
+    plan = plan_survey(reg.get(algorithm_id), inputs, output_dir, params, tile_size_m=tile_size_m, buffer_m=buffer_m,
+                       outputs=outputs, overwrite=overwrite, crs=crs, entry_points=reg.entry_points)
+    t_tiles = time.perf_counter()
+    execution = execute_survey(plan, workers=workers, scheduler=scheduler)
+    t_merge = time.perf_counter()
+    failed, written = merge_survey(plan, reg.style_dirs)
+    t_end = time.perf_counter()
+    return survey_report(plan, execution, failed, written, {
+        "catalog": round(t_tiles - t_start, 3), "tiles": round(t_merge - t_tiles, 3),
+        "merge": round(t_end - t_merge, 3), "total": round(t_end - t_start, 3)})
+
+
+@dataclass
+class SurveyPlan:
+    """What ``plan_survey`` decided: the tiles to run (``tasks``) and where everything goes."""
+
+    alg: Any
+    values: dict  # the validated parameters
+    crs_given: Any
+    out: Path
+    wanted: list  # the outputs written
+    paths: dict  # output name -> path
+    catalog: Any
+    tiles: list
+    skipped: list  # tiles an earlier run finished
+    tasks: list  # one per tile to run
+    state: dict  # the manifest
+    manifest_path: Path
+    tile_size_m: float
+    buffer_m: float  # used
+    buffer_declared_m: float | None
+
+
+def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any] | None, *, tile_size_m: float,
+                buffer_m: float | None, outputs: Mapping[str, str] | None, overwrite: bool, crs,
+                entry_points) -> SurveyPlan:
+    """Check the request, read the catalog from the headers, cut the tiles, resume or start the
+    manifest, and describe each tile still to run as a task (plain data, for any worker)."""
+    from .io.atomic import check_writable
+
     values = alg.validate_params(params or {})
     point_inputs = [i for i in alg.inputs if not i.optional]
     if len(point_inputs) != 1 or point_inputs[0].kind != "points" or point_inputs[0].multiple:
@@ -896,26 +937,7 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         raise UsageError(f"--tile-size-m {tile_size_m}: give a positive size in metres, e.g. 500")
     if buffer_m is not None and not (buffer_m >= 0 and np.isfinite(buffer_m)):
         raise UsageError(f"--buffer-m {buffer_m}: give a size in metres, 0 or more")
-    named = dict(outputs or {})
-    kinds = {o.name: o.kind for o in alg.outputs}
-    for n in named:
-        if n not in kinds:
-            raise UsageError(f"{alg.id} has no output {n!r}; its outputs: {', '.join(sorted(kinds))}")
-        if kinds[n] == "image":
-            raise UsageError(f"{alg.id}'s {n!r} is a picture of one run; a survey run does not make it (drop it)")
-    wanted = [o for o in alg.outputs if o.kind != "image" and (not o.optional or o.name in named)]
-    out = Path(output_dir)
-    if out.suffix.lower() in (".tif", ".gpkg", ".laz", ".las", ".json"):
-        raise UsageError(f"-o {str(out)!r}: a survey run writes into a folder (its outputs and survey.json); give a "
-                         "folder")
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"-o {str(out)!r} is a file; a survey run writes into a folder")
-    paths = {}
-    for o in wanted:
-        if o.name in named:
-            paths[o.name] = Path(named[o.name])
-        else:
-            paths[o.name] = out / (o.name if o.kind == "points" else o.name + o.extension)
+    named, kinds, wanted, out, paths = _survey_outputs(alg, output_dir, outputs)
 
     files = expand_survey_inputs(inputs)
     catalog = build_catalog(files, crs)
@@ -976,7 +998,7 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         "crs": catalog.crs.to_wkt() if catalog.crs is not None else None, "dims": list(dims) if dims is not None else None,
         "tile_dir": str(tile_dir.resolve()), "requested": sorted(n for n in named if n in kinds),
         "outputs": {o.name: str(paths[o.name].resolve()) for o in wanted}, "arch": kernels.requested_arch(),
-        "entry_points": reg.entry_points,
+        "entry_points": entry_points,
     }
     tasks = []
     for t in todo:
@@ -985,6 +1007,41 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
     if skipped:
         log.info("%d of %d tiles were done by an earlier run; skipping them", len(skipped), len(tiles))
 
+    return SurveyPlan(alg, values, crs, out, wanted, paths, catalog, tiles, skipped, tasks, state, manifest_path,
+                      tile_size_m, buffer_used_m, declared)
+
+
+def _survey_outputs(alg, output_dir, outputs: Mapping[str, str] | None):
+    """The outputs a survey run writes and their paths (a folder, with named outputs where the
+    user put them); a picture of one run or a file as the folder is refused."""
+    named = dict(outputs or {})
+    kinds = {o.name: o.kind for o in alg.outputs}
+    for n in named:
+        if n not in kinds:
+            raise UsageError(f"{alg.id} has no output {n!r}; its outputs: {', '.join(sorted(kinds))}")
+        if kinds[n] == "image":
+            raise UsageError(f"{alg.id}'s {n!r} is a picture of one run; a survey run does not make it (drop it)")
+    wanted = [o for o in alg.outputs if o.kind != "image" and (not o.optional or o.name in named)]
+    out = Path(output_dir)
+    if out.suffix.lower() in (".tif", ".gpkg", ".laz", ".las", ".json"):
+        raise UsageError(f"-o {str(out)!r}: a survey run writes into a folder (its outputs and survey.json); give a "
+                         "folder")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o {str(out)!r} is a file; a survey run writes into a folder")
+    paths = {}
+    for o in wanted:
+        if o.name in named:
+            paths[o.name] = Path(named[o.name])
+        else:
+            paths[o.name] = out / (o.name if o.kind == "points" else o.name + o.extension)
+    return named, kinds, wanted, out, paths
+
+
+def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=None) -> dict:
+    """Run the plan's tasks (a local pool of ``workers`` or the Dask ``scheduler``), recording each
+    tile's result in the manifest as it comes; a progress bar on a terminal."""
+    alg, state, manifest_path, tiles, skipped, tasks = (plan.alg, plan.state, plan.manifest_path, plan.tiles,
+                                                        plan.skipped, plan.tasks)
     worker_peaks: dict = {}
     counts = {"done": 0, "failed": 0, "empty": 0}
     running: set = set()
@@ -1013,7 +1070,6 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         bar.update(1)
 
     _write_json_atomic(manifest_path, state)
-    t_tiles = time.perf_counter()
     cluster = None
     n_workers = None
     if tasks:
@@ -1024,8 +1080,16 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
             n_workers = max(1, min(workers or os.cpu_count() or 1, len(tasks)))
             _run_local(tasks, n_workers, on_result, on_start)
     bar.close()
-    t_merge = time.perf_counter()
 
+    return {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
+            "worker_peak_rss_mb": worker_peaks}
+
+
+def merge_survey(plan: SurveyPlan, style_dirs) -> tuple[list, dict]:
+    """The tiles' outputs merged into the survey's when no tile failed (all together, or none);
+    returns (the failed tiles, the outputs written)."""
+    alg, wanted, paths, tiles, state, catalog = plan.alg, plan.wanted, plan.paths, plan.tiles, plan.state, plan.catalog
+    manifest_path = plan.manifest_path
     failed = [{"tile": n, "error": r.get("error")} for n, r in sorted(state["tiles"].items())
               if r.get("status") == "failed" and n in {t.name for t in tiles}]
     written = {}
@@ -1033,11 +1097,16 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         from .io.atomic import staged_outputs
 
         with staged_outputs() as staging:  # the merged outputs appear together, or none of them
-            written = _merge_outputs(alg, wanted, paths, tiles, state, catalog, reg.style_dirs, overwrite=True)
+            written = _merge_outputs(alg, wanted, paths, tiles, state, catalog, style_dirs, overwrite=True)
             staging.commit()
         state["merged"] = True
         _write_json_atomic(manifest_path, state)
-    t_end = time.perf_counter()
+    return failed, written
+
+
+def survey_report(plan: SurveyPlan, execution: dict, failed: list, written: dict, timings: dict) -> dict:
+    """The run's report (as ``--json`` prints)."""
+    alg, values, catalog, tiles, state, crs = plan.alg, plan.values, plan.catalog, plan.tiles, plan.state, plan.crs_given
     recs = [state["tiles"][t.name] for t in tiles if t.name in state["tiles"]]
     return {
         "algorithm": alg.id, "plugin": alg.plugin, "version": alg.version,
@@ -1045,15 +1114,13 @@ def run_survey(algorithm_id: str, inputs: Sequence[str], output_dir, params: Map
         "parameters": {k: ("auto" if v is None and alg.parameter(k).allow_auto else v) for k, v in values.items()},
         "survey": {"n_files": len(catalog.files), "n_points": catalog.n_points, "bounds": catalog.bounds,
                    "crs": _crs_name(catalog.crs), "crs_given": crs if crs is None or isinstance(crs, str) else
-                   _crs_name(crs), "tile_size_m": tile_size_m, "buffer_m": buffer_used_m,
-                   "buffer_declared_m": declared},
+                   _crs_name(crs), "tile_size_m": plan.tile_size_m, "buffer_m": plan.buffer_m,
+                   "buffer_declared_m": plan.buffer_declared_m},
         "n_tiles": len(tiles), "n_done": sum(r.get("status") in ("done", "empty") for r in recs),
-        "n_skipped": len(skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),
-        "failed": failed, "outputs": written, "manifest": str(manifest_path),
-        "execution": {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
-                      "worker_peak_rss_mb": worker_peaks, "driver_peak_rss_mb": _peak_rss_mb()},
-        "timings_s": {"catalog": round(t_tiles - t_start, 3), "tiles": round(t_merge - t_tiles, 3),
-                      "merge": round(t_end - t_merge, 3), "total": round(t_end - t_start, 3)},
+        "n_skipped": len(plan.skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),
+        "failed": failed, "outputs": written, "manifest": str(plan.manifest_path),
+        "execution": {**execution, "driver_peak_rss_mb": _peak_rss_mb()},
+        "timings_s": timings,
     }
 
 

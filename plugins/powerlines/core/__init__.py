@@ -73,7 +73,7 @@ from .clutter import (  # noqa: F401
     in_foliage,
     off_their_spans,
 )
-from .short_wires import (  # noqa: F401
+from .missed_wires import (  # noqa: F401
     _alone_in_its_plane,
     _along_axis,
     _Around,
