@@ -96,7 +96,7 @@ def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10,
     from toolbox_plugins.pylon_pose.core import rotation
 
     from toolbox.io.cameras import read_colmap_text, write_colmap_text
-    from toolbox.synthetic.pylons import perturb_images
+    from toolbox_plugins.synthetic_scene.generator.pylons import perturb_images
 
     rows = []
     for seed, shift_m, turn_deg in [(s_, 0.0, 0.0) for s_ in seeds] + list(perturbed):

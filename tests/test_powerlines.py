@@ -2623,7 +2623,7 @@ def test_corridor_variants_have_their_geometry():
     """Stacked circuits hang three phases one above another at each plan offset; a hillside
     corridor's ground rises by its slope; a 400 m span is strung so its sag keeps half the
     attachment height clear."""
-    from toolbox.synthetic.scene import make_scene
+    from toolbox_plugins.synthetic_scene.generator.scene import make_scene
 
     st = make_scene("corridor", 1, density_ppm2=1.0, line_variant="stacked")
     a = [w for w in st.truth["wires"] if w["line"] == "A" and w["kind"] == "phase"]
@@ -2649,7 +2649,7 @@ def test_mobile_scanner_scene_thins_with_range():
     """scanner=mobile: a track 2 m over the ground beside line A; points kept with probability
     min(1, (10 m / range)^2): the density within 10 m of the scanner is the one asked for, at
     30 m a ninth of it, and the wires overhead keep their points near the track."""
-    from toolbox.synthetic.scene import make_scene
+    from toolbox_plugins.synthetic_scene.generator.scene import make_scene
 
     sc = make_scene("corridor", 2, density_ppm2=100.0, width_m=200.0, height_m=120.0, line_variant="distribution",
                     scanner="mobile")

@@ -294,7 +294,7 @@ def test_refinement_on_segments_reaches_the_pose_past_the_similarity_cells():
     """Four photos whose segments are the two edges of every beam (a beam 3 px wide) at a known
     pose, among clutter; from a start 0.2 m, 0.5 deg of heading and 0.3 deg of tilt off, the
     refinement lands on the pose within 1 cm and 0.02 deg (A_s on 4 px cells stops at about 0.2 m)."""
-    from toolbox.synthetic.pylons import builtin_models
+    from toolbox_plugins.pylon_pose.models import builtin_models
     from toolbox_plugins.pylon_pose import search
 
     m = builtin_models()["u110"]
@@ -329,7 +329,7 @@ def test_refinement_on_segments_reaches_the_pose_past_the_similarity_cells():
 
 
 def test_perturbed_cameras_are_off_by_exactly_the_given_amounts():
-    from toolbox.synthetic.pylons import perturb_images
+    from toolbox_plugins.synthetic_scene.generator.pylons import perturb_images
 
     images = {k: Image(k, f"{k}.jpg", 1, quaternion_from_matrix(_look_at(np.array([k * 10.0, 0, 100]), [0, 0, 0])[0]),
                        _look_at(np.array([k * 10.0, 0, 100]), [0, 0, 0])[1]) for k in (1, 2, 3)}
@@ -363,7 +363,7 @@ def test_triangle_hypotheses_recover_the_pose_by_p3p_and_drop_tilted_ones():
     deg of the pose; the same photo of a pylon leaning 3 deg gives none under the 1 deg limit."""
     import cv2
 
-    from toolbox.synthetic.pylons import builtin_models
+    from toolbox_plugins.pylon_pose.models import builtin_models
     from toolbox_plugins.pylon_pose import search
 
     rv = np.random.default_rng(1).normal(size=(6, 3))

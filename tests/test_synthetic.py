@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import toolbox
-from toolbox.synthetic import make_scene
-from toolbox.synthetic.objects import catenary_z
+from toolbox_plugins.synthetic_scene.generator import make_scene
+from toolbox_plugins.synthetic_scene.generator.objects import catenary_z
 
 
 @pytest.fixture(scope="module")

@@ -54,7 +54,7 @@ def _models(path):
     from toolbox.io.wireframes import read_wireframes, rotational_symmetry_deg
 
     if path is None:
-        from toolbox.synthetic.pylons import builtin_models
+        from .models import builtin_models
 
         lib = {n: (m.a, m.b) for n, m in builtin_models().items()}
     else:

@@ -1,5 +1,5 @@
 """Adapter of the synthetic scene generator: parameters, outputs (LAZ, truth GeoPackage and JSON,
-true DTM). The generator itself is ``toolbox.synthetic`` (pure numpy)."""
+true DTM). The generator itself is ``generator`` beside it (pure numpy)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,12 @@ KINDS = ("corridor", "terrain", "roofs", "pylons")
 def _run(inputs, params, ctx):
     import datetime
 
-
     from toolbox.io.points import PointCloud, parse_crs
     from toolbox.io.rasters import Raster
-    from toolbox.synthetic import make_scene
 
-    from .truth import truth_layers, truth_json
-
-    from toolbox.synthetic.scene import DEFAULT_EXTENT, DEFAULT_SPAN_M
+    from .generator import make_scene
+    from .generator.scene import DEFAULT_EXTENT, DEFAULT_SPAN_M
+    from .truth import truth_json, truth_layers
 
     if params["kind"] == "pylons":
         return _pylons(params, ctx)
@@ -66,7 +64,8 @@ def _pylons(params, ctx):
     """kind=pylons: a UAV photo survey of lattice pylons (no point cloud)."""
     from toolbox.io.points import parse_crs
     from toolbox.io.rasters import Raster
-    from toolbox.synthetic.pylons import make_pylon_survey, survey_files
+
+    from .generator.pylons import make_pylon_survey, survey_files
 
     crs = parse_crs(params["crs"])
     if not crs.is_projected:

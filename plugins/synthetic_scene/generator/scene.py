@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .objects import (
-    Building, Trees, catenary_sag, catenary_z, compound_building, lattice_tower, sample_segments, vegetation_class,
+    Building,
+    Trees,
+    catenary_sag,
+    catenary_z,
+    compound_building,
+    lattice_tower,
+    sample_segments,
+    vegetation_class,
     wood_pole,
 )
 from .terrain import Terrain, _line_frame
