@@ -10,6 +10,9 @@ from toolbox.errors import DataError
 from toolbox.io.cameras import Camera, Image, quaternion_from_matrix, read_colmap_text, write_colmap_text
 from toolbox_plugins.pylon_pose import core, reference
 
+# one worker: the photo survey (20 s to make) is built once for every test that reads it
+pytestmark = pytest.mark.xdist_group("pylon_survey")
+
 
 def _look_at(centre, target):
     z = np.asarray(target, float) - centre

@@ -28,11 +28,8 @@ DEBT = {
     ("params", "plugins/powerlines/core/clutter.py", "in_foliage"),
     ("params", "plugins/powerlines/core/clutter.py", "in_a_surface"),
     ("params", "plugins/powerlines/core/clutter.py", "along_a_surface"),
-    ("params", "plugins/powerlines/core/supports.py", "find_pylons"),
-    ("params", "plugins/powerlines/core/supports.py", "_pole_pair"),
+    ("params", "plugins/powerlines/core/supports.py", "pole_pair"),
     ("params", "plugins/powerlines/core/supports.py", "_tower_shaped"),
-    ("params", "plugins/powerlines/core/supports.py", "find_towers_passed_through"),
-    ("params", "plugins/powerlines/core/supports.py", "find_poles"),
     ("params", "plugins/powerlines/stages/supports.py", "pylons_layer"),
 }
 

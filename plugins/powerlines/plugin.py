@@ -9,30 +9,21 @@ from toolbox import Algorithm, Input, LayerMerge, Output, Parameter
 
 
 def _run(inputs, params, ctx):
-    """The chain of ``stages`` (see its docstring): the scene, each stage in turn, the layers."""
+    """The chain of ``stages`` (see its docstring), then the layers stage's result."""
     import time
 
-    from .settings import MIN_CANDIDATES, Settings
-    from .stages import CHAIN, ground, layers
-    from .state import State
+    from .settings import Settings
+    from .stages import layers, no_wire_possible, run_chain
 
     pc = inputs["points"]
     pc.require_points("powerlines", 100)
-    settings, st = Settings.of(params), State()
-    t = time.perf_counter()
-    scene = ground.stage(pc, settings, ctx, st.timings)
-    stage_s = {"ground": time.perf_counter() - t}
-    if len(scene.candidates) < MIN_CANDIDATES:  # a field, a road: nothing to find is a result, not an error
+    settings = Settings.of(params)
+    scene, st = run_chain(pc, settings, ctx)
+    if no_wire_possible(scene):  # a field, a road: nothing to find is a result, not an error
         return layers.nothing_found_for(scene, settings, ctx, st.timings)
-    for name, stage in CHAIN:
-        t = time.perf_counter()
-        st = stage(scene, st, settings, ctx)
-        stage_s[name] = time.perf_counter() - t
-        ctx.log.debug("powerlines: %s: stage %s took %.2f s", pc.source, name, stage_s[name])
     t = time.perf_counter()
     result = layers.stage(scene, st, settings, ctx)
-    stage_s["layers"] = time.perf_counter() - t
-    result.stats.update({f"stage_{k}_s": round(v, 3) for k, v in stage_s.items()})
+    result.stats["stage_layers_s"] = round(time.perf_counter() - t, 3)
     return result
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from .catenaries import SIDE_BY_SIDE_MIN_GAP_M, WIRE_LATERAL_RMS_M, line_fit
 
 
-def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_BY_SIDE_MIN_GAP_M, depth: int = 3,
+def split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_BY_SIDE_MIN_GAP_M, depth: int = 3,
                    window_m: float = 5.0, max_sd: float = WIRE_LATERAL_RMS_M) -> np.ndarray:
     """Sub-conductors of a bundle hang side by side (2), in a triangle (3) or a square (4),
     closer than their scatter can keep apart in a neighbour graph: split a piece in two where
@@ -21,11 +21,11 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
     trend (``_across_wires``), then a cut into one group per wire (a ribbon of 3-4 wires), about
     the straight trend and then about the wires' own."""
     def halves(r):
-        split = _two_means_1d(r, min_points)
+        split = two_means_1d(r, min_points)
         return None if split is None else split[0].astype(np.int64)
 
     def clean_halves(r, split=None):
-        return _clean_cut(_two_means_1d(r, min_points) if split is None else split, min_gap, max_sd)
+        return _clean_cut(two_means_1d(r, min_points) if split is None else split, min_gap, max_sd)
 
     def per_wire(r):
         found = _clean_groups(r, min_points, min_gap, max_sd)
@@ -39,7 +39,7 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
             m = np.flatnonzero(lab == k)
             slope, icpt = line_fit(s[m], off[m])
             straight = off[m] - slope * s[m] - icpt
-            across = _two_means_1d(straight, min_points)
+            across = two_means_1d(straight, min_points)
             found = [clean_halves(straight, across)]
             if z is not None:
                 found.append(clean_halves(_height_residual(s[m], z[m], window_m)))
@@ -63,7 +63,7 @@ def _split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_B
             if best is None and apart and np.ptp(s[m]) >= 2 * WINDOWED_SPLIT_M:
                 # the phases' offsets about any straight trend move together along a long piece
                 # (0.2-0.3 m over 373 m on ribbon04_d5 seed 8): grouped window by window, linked
-                groups = _windowed_groups(s[m], off[m], min_points, min_gap, max_sd, WINDOWED_SPLIT_M)
+                groups = windowed_groups(s[m], off[m], min_points, min_gap, max_sd, WINDOWED_SPLIT_M)
                 best = None if groups is None else (0.0, groups)
             if best is not None:
                 groups = best[1]
@@ -88,7 +88,7 @@ def _clean_cut(split, min_gap: float, max_sd: float):
 WINDOWED_SPLIT_M = 50.0
 
 
-def _windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, window_m: float):
+def windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, window_m: float):
     """One group per wire of a long piece whose wires move together across its line: in each
     window of about ``window_m`` along it, the offsets about the window's own straight trend cut
     cleanly (in two, or one group per wire, or one wire alone); a window's groups are linked to
@@ -108,7 +108,7 @@ def _windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, win
             return None
         slope, icpt = line_fit(s[i], off[i])
         r = off[i] - slope * s[i] - icpt
-        split = _two_means_1d(r, min_points)
+        split = two_means_1d(r, min_points)
         if split is not None and split[2] - split[1] < 0.5 * min_gap:
             g = np.zeros(len(i), np.int64)  # one wire
         else:
@@ -230,7 +230,7 @@ def _height_residual(s, z, window_m: float) -> np.ndarray:
         return out
 
     r = z - running_mean(z)
-    split = _two_means_1d(r, max(3, len(r) // 10))
+    split = two_means_1d(r, max(3, len(r) // 10))
     if split is not None:
         side, c0, c1, _ = split
         level = np.where(side, c1, c0)  # each point's group centre
@@ -238,7 +238,7 @@ def _height_residual(s, z, window_m: float) -> np.ndarray:
     return r
 
 
-def _two_means_1d(r: np.ndarray, min_size: int):
+def two_means_1d(r: np.ndarray, min_size: int):
     """The best split of values ``r`` into a lower and an upper group (least within-group sum of
     squares: exact 2-means in one dimension, every cut of the sorted values tried through prefix
     sums), each of at least ``min_size`` values. Returns (upper-group mask, lower mean, upper

@@ -172,13 +172,13 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
         comp = np.flatnonzero(lab == k)
         if len(comp) < min_points:
             continue
-        if _is_ribbon(xyz[comp], bin_m, max_band_m, floor_share):
+        if is_ribbon(xyz[comp], bin_m, max_band_m, floor_share):
             out[comp] = True
             continue
         # a ribbon linked to a crown or to a crossing line is a ribbon where it runs alone:
         # the set judged again piece by piece along its main axis
         for m in _pieces_along(xyz, comp, piece_m):
-            if len(m) >= min_points and planar[m].any() and _is_ribbon(xyz[m], bin_m, max_band_m, floor_share):
+            if len(m) >= min_points and planar[m].any() and is_ribbon(xyz[m], bin_m, max_band_m, floor_share):
                 out[m] = True
     return out & planar
 
@@ -235,7 +235,7 @@ def _pieces_along(xyz, comp, piece_m: float) -> list[np.ndarray]:
     return np.split(comp[np.argsort(piece, kind="stable")], np.cumsum(np.bincount(piece))[:-1])
 
 
-def _is_ribbon(xyz, bin_m, max_band_m, floor_share) -> bool:
+def is_ribbon(xyz, bin_m, max_band_m, floor_share) -> bool:
     """Points that, across their main axis in plan, fall into two or more bands no wider than
     ``max_band_m`` with empty bins (under ``floor_share`` of the fullest) between them: wires side
     by side; or, within one such band in plan, into two or more such bands in height about their

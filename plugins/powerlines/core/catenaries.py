@@ -51,6 +51,15 @@ N_BEST_LINES = 5
 
 # (pairs of points within min_length / 2 a set's neighbourhoods are kept for: 16 bytes each)
 MAX_NEIGHBOUR_PAIRS = 20_000_000
+# the least a point may lie off a fitted catenary (or line) and be on it: a fit's rms understates
+# how far its wire's points scatter when it is thin (a few points, a short piece)
+FIT_TOLERANCE_FLOOR_M = 0.15
+
+
+def fit_tolerance_m(rms_m: float, floor_m: float = FIT_TOLERANCE_FLOOR_M) -> float:
+    """How far from a fit a point may lie and be on it: three times the fit's rms (or MAD), at
+    least ``floor_m``."""
+    return max(3 * rms_m, floor_m)
 
 
 @dataclass
@@ -222,7 +231,7 @@ def fit_catenary(s, z):
     r = res(x)
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit
     mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
-    inl = np.abs(r) <= max(3 * mad, 0.15)
+    inl = np.abs(r) <= fit_tolerance_m(mad)
     with np.errstate(over="ignore"):  # a hopeless piece's residuals may be huge: its rms is then inf
         rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else np.inf
     return float(z0), float(s0), float(np.exp(lc)), rms

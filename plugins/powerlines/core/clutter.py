@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .catenaries import SURFACE_CONTRAST, WIRE_ID_BASE, catenary, line_fit
+from .catenaries import SURFACE_CONTRAST, WIRE_ID_BASE, catenary, fit_tolerance_m, line_fit
 
 
 def _contrast(tree, k, s, off, z, fit) -> float:
@@ -245,6 +245,6 @@ def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
         near = np.flatnonzero((s >= sp.s_from - margin_m) & (s <= sp.s_to + margin_m))
         near = near[np.abs(off[near] - (sp.offset + sp.offset_slope * s[near])) <= lateral_m]
         r = np.abs(catenary(s[near], sp.z0, sp.s0, sp.c) - z[near])
-        ok = (r <= max(3 * sp.rms, 0.15)) & (r < best_r[near])
+        ok = (r <= fit_tolerance_m(sp.rms)) & (r < best_r[near])
         best_r[near[ok]], best_k[near[ok]] = r[ok], k
     return best_r, best_k

@@ -7,7 +7,7 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from .catenaries import MAX_NEIGHBOUR_PAIRS, N_BEST_LINES, catenary, fit_catenary, line_fit
+from .catenaries import MAX_NEIGHBOUR_PAIRS, N_BEST_LINES, catenary, fit_catenary, fit_tolerance_m, line_fit
 from .spans import _spans_by_line
 from .wires_3d import _longest_run
 
@@ -46,7 +46,7 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
         rng = np.random.default_rng([seed, len(left)])
         # each point's neighbourhood searched once per set, where that fits in memory
         tree = cKDTree(xyz[left])
-        near = _SetNeighbours(tree, min_length_m / 2) if (tree.count_neighbors(tree, min_length_m / 2) - len(left)) \
+        near = SetNeighbours(tree, min_length_m / 2) if (tree.count_neighbors(tree, min_length_m / 2) - len(left)) \
             // 2 <= MAX_NEIGHBOUR_PAIRS else None
         while len(left) >= min_points and np.linalg.norm(np.ptp(xyz[left], axis=0)) >= min_length_m:
             run = _best_straight_run(xyz[left], min_length_m, max_gap_m, tol_m, n_samples, rng,
@@ -315,7 +315,7 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
             across = off[near] - (sp.offset + sp.offset_slope * s[near])
             dz = pz[near] - catenary(s[near], sp.z0, sp.s0, sp.c)
             if stacked:
-                zone = (np.abs(across) < min_sep_m) & (np.abs(dz) > max(3 * sp.rms, tol_m)) & (np.abs(dz) <= max_dz_m)
+                zone = (np.abs(across) < min_sep_m) & (np.abs(dz) > fit_tolerance_m(sp.rms, tol_m)) & (np.abs(dz) <= max_dz_m)
             else:
                 zone = (np.abs(across) >= min_sep_m) & (np.abs(across) <= max_sep_m) & (np.abs(dz) <= max_dz_m)
             near, across, dz = near[zone], across[zone], dz[zone]
@@ -341,7 +341,7 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
                     o1, o0 = line_fit(s[k], off[k]) if len(k) >= 3 else (0.0, float(np.median(off[k])))
                     r_z = np.abs(pz[near] - catenary(s[near], *fit[:3]))
                     r_o = np.abs(off[near] - o1 * s[near] - o0)
-                    pick = np.flatnonzero((r_z <= max(3 * fit[3], tol_m)) & (r_o <= tol_m))
+                    pick = np.flatnonzero((r_z <= fit_tolerance_m(fit[3], tol_m)) & (r_o <= tol_m))
                     k = near[pick]
                     ok = len(k) >= min_points and fit[3] <= max_rms
                     if not ok:
@@ -374,13 +374,13 @@ def _alone_in_its_plane(k, s, off, z, fit, trend, max_around: float, plane_m: fl
 def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng, neighbours=None):
     """The most populous straight run in ``p`` (see straight_wires), its indices sorted along it,
     or None when none reaches ``min_length_m``. ``neighbours(i)``: the points of ``p`` within
-    min_length / 2 of its points ``i`` as ``_ball_pairs`` gives them (default: searched here)."""
+    min_length / 2 of its points ``i`` as ``ball_pairs`` gives them (default: searched here)."""
     n = len(p)
     # pairs drawn locally (the second point within min_length / 2 of the first): a wire of 20
     # points in a set of thousands (linked to a crown) is then drawn as often as the crown
     i = rng.integers(0, n, min(max(n_samples, n), 4 * n_samples))
     # (sample, neighbour) pairs, grouped by sample, each sample's neighbours in index order
-    sid, flat = neighbours(i) if neighbours is not None else _ball_pairs(cKDTree(p), p[i], min_length_m / 2)
+    sid, flat = neighbours(i) if neighbours is not None else ball_pairs(cKDTree(p), p[i], min_length_m / 2)
     first = np.searchsorted(sid, np.arange(len(i)))
     size = np.diff(np.r_[first, len(sid)])
     j = flat[first + np.array([int(rng.integers(0, m)) for m in size], np.int64)]
@@ -414,7 +414,7 @@ def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng, neighb
     return None
 
 
-def _ball_pairs(tree, q, radius):
+def ball_pairs(tree, q, radius):
     """(k, index) of each point of ``tree`` within ``radius`` of the point ``q[k]``, grouped by
     k, indices ascending."""
     near = tree.query_ball_point(q, radius)  # (several points: each list sorted)
@@ -422,11 +422,11 @@ def _ball_pairs(tree, q, radius):
     return sid, (np.concatenate(near).astype(np.int64) if len(sid) else np.zeros(0, np.int64))
 
 
-class _SetNeighbours:
+class SetNeighbours:
     """The neighbours within ``radius`` of each point of a set (``tree``), searched once
     (``straight_wires`` draws from the set a run at a time, and the neighbourhoods barely
     change): ``of(i)`` gives them among the points still alive (renumbered in order) as
-    ``_ball_pairs`` does."""
+    ``ball_pairs`` does."""
 
     def __init__(self, tree, radius):
         n = tree.n

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .catenaries import WIRE_HEIGHT_RMS_M, catenary, fit_catenary, line_fit, median_line_fit
+from .catenaries import WIRE_HEIGHT_RMS_M, catenary, fit_catenary, fit_tolerance_m, line_fit, median_line_fit
 from .clutter import _contrast, _on_spans
 from .wires_3d import _longest_run, _refined_trend, peel_catenaries
 
@@ -53,12 +53,12 @@ def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0
     return False
 
 
-def _pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
+def pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
     """The share of the span ``sp``'s own points (``s`` along its line, ``off`` across and ``dz``
     over its curve, as for span_on_surface) that lie in pieces, cut where its points leave gaps
     over ``gap_m``, each in a surface of its own: a short wire found along the top edges of two
     roofs a street apart lies in neither surface over its whole length, nor at one tilt."""
-    own = (s >= sp.s_from) & (s <= sp.s_to) & (np.abs(off) <= lateral_m) & (np.abs(dz) <= max(3 * sp.rms, 0.15))
+    own = (s >= sp.s_from) & (s <= sp.s_to) & (np.abs(off) <= lateral_m) & (np.abs(dz) <= fit_tolerance_m(sp.rms))
     ss = np.sort(s[own])
     if len(ss) < 2:
         return 0.0
@@ -145,7 +145,7 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
             d = supports - anchor
             sup_s, sup_off = d @ direction, d @ [-direction[1], direction[0]]
         for sp in line_spans:
-            tol = max(3 * sp.rms, 0.15)
+            tol = fit_tolerance_m(sp.rms)
             for end, sign in ((sp.s_to, 1.0), (sp.s_from, -1.0)):
                 out = sign * (s - end)
                 limit = np.inf
@@ -256,7 +256,7 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                     continue  # the 3D step fitted its points there and found no wire's catenary
                 if ours is not None:
                     past = ours & (s > lo) & (s < hi) & \
-                        (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
+                        (np.abs(pz - catenary(s, sp.z0, sp.s0, sp.c)) <= fit_tolerance_m(sp.rms))
                     if past.any():
                         end = float(s[past].max() if sign > 0 else s[past].min())
                 z_end = float(catenary(end, sp.z0, sp.s0, sp.c))
@@ -301,7 +301,7 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                         o1, o0 = line_fit(s[k], off[k])
                         more = np.flatnonzero((sign * (s - end) > 0) & (sign * (stop - s) > 0) & ~taken &
                                               (np.abs(off - o0 - o1 * s) <= lateral_m) &
-                                              (np.abs(pz - catenary(s, *fit[:3])) <= max(3 * fit[3], 0.15)))
+                                              (np.abs(pz - catenary(s, *fit[:3])) <= fit_tolerance_m(fit[3])))
                         run = _longest_run(s, more, max_gap_m)
                         if len(run) <= len(k) or not np.isin(k, run).all():
                             break
@@ -348,7 +348,7 @@ def _robust_trend(sp, s, off, z, own):
     least-squares trend (and widen its tolerance) enough to hide that the wire's pieces either
     side of the crown line up. The stored trend where fewer than 3 points."""
     on = own & (s >= sp.s_from) & (s <= sp.s_to) & \
-        (np.abs(z - catenary(s, sp.z0, sp.s0, sp.c)) <= max(3 * sp.rms, 0.15))
+        (np.abs(z - catenary(s, sp.z0, sp.s0, sp.c)) <= fit_tolerance_m(sp.rms))
     if on.sum() < 3:
         return (sp.offset_slope, sp.offset), sp.lateral_tol
     o1, o0, tol = _refined_trend(s[on], off[on], *median_line_fit(s[on], off[on]))

@@ -3,6 +3,7 @@ through) and their points."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,16 +33,38 @@ class Pylon:
         return float(np.hypot(x0 + (c + 0.5) * cell_m - self.x, y0 + (r + 0.5) * cell_m - self.y).max()) + cell_m
 
 
-def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cell_m: float = 1.0,
-                reach_m: float = 12.0, top_share: float = 0.8, column_share: float = 0.5,
-                end_radius_m: float = 10.0, max_side_m: float = 40.0, min_ends: int = 2, span_lines=None,
-                max_rugged: float = 0.7, min_slenderness: float = 2.0, passed_by: list | None = None,
-                under_line_m: float = 2.0, max_side_ratio: float = 2.0, along_deg: float = 10.0,
-                wire_xyh=None, max_height_share: float = 1.5, arm_m: float = 6.0,
-                reach_down_share: float = 0.35, pole_area_m2: float = 4.0, over_wires_share: float = 1.2,
-                over_wires_reach_down_share: float = 0.15, min_axis_share: float = 0.25,
-                axis_area_m2: float = 12.0, pair_apart_m: float = 1.5, one_tower_m2: float = 100.0,
-                peak_reach_m: float = 5.0):
+@dataclass(frozen=True)
+class TowerRules:
+    """The thresholds of ``find_pylons`` (its docstring says what each does; the values were set
+    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
+
+    cell_m: float = 1.0
+    reach_m: float = 12.0
+    column_share: float = 0.5
+    end_radius_m: float = 10.0
+    max_side_m: float = 40.0
+    min_ends: int = 2
+    max_rugged: float = 0.7
+    min_slenderness: float = 2.0
+    under_line_m: float = 2.0
+    max_side_ratio: float = 2.0
+    along_deg: float = 10.0
+    max_height_share: float = 1.5
+    arm_m: float = 6.0
+    reach_down_share: float = 0.35
+    pole_area_m2: float = 4.0
+    over_wires_share: float = 1.2
+    over_wires_reach_down_share: float = 0.15
+    min_axis_share: float = 0.25
+    axis_area_m2: float = 12.0
+    pair_apart_m: float = 1.5
+    one_tower_m2: float = 100.0
+    peak_reach_m: float = 5.0
+
+
+def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top_share: float = 0.8,
+                span_lines=None, passed_by: list | None = None, wire_xyh=None, rules: TowerRules | None = None,
+                **overrides):
     """Towers that carry the conductors: tall structures under the lines where spans end.
 
     x, y, hag: the off-ground, off-wire points (metres; hag = height above ground);
@@ -75,13 +98,13 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     beside it (a tower holding an earth wire not found) reaches down to
     ``over_wires_reach_down_share`` of its height (a lattice's legs; a crown over the wires hangs
     off the ground). A candidate up to ``axis_area_m2`` (a pole with its arms) has at least
-    ``min_axis_share`` of its points under its head on one thin vertical (``_axis_share``: a
+    ``min_axis_share`` of its points under its head on one thin vertical (``axis_share``: a
     pole's column; a crown spreads over metres). The base is the median of its points (the
     middle of its column cells leans to the side a street scan sees). ``passed_by``, a list, gets the
     candidates that more spans run past than end at (a tree, or a suspension tower the wires run
     through: its arms, if found as lines, tell). A candidate up to twice ``axis_area_m2`` standing
     on two thin verticals at least ``pair_apart_m`` apart, each holding span ends of its own, is
-    two poles (``_pole_pair``: a line ending at its pole beside another line's pole). A body over
+    two poles (``pole_pair``: a line ending at its pole beside another line's pole). A body over
     ``one_tower_m2`` (the family's largest true tower 73 m2 of cells, AHN4's 76) is a lattice
     with crowns touching it: its base comes from its cells within ``peak_reach_m`` of its
     highest column cell, and its body keeps the cells within the half-diagonal of a square of
@@ -93,6 +116,12 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     (the arms) reaching within a cell of one. A tree beside the line, where wires lost in its crown
     end, has them all on one side, clear of it.
     """
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or TowerRules(), **overrides)
+    (cell_m, reach_m, column_share, end_radius_m, max_side_m, min_ends, max_rugged, min_slenderness, under_line_m,
+     max_side_ratio, along_deg, max_height_share, arm_m, reach_down_share, pole_area_m2, over_wires_share,
+     over_wires_reach_down_share, min_axis_share, axis_area_m2, pair_apart_m, one_tower_m2,
+     peak_reach_m) = dataclasses.astuple(r)
     from scipy import ndimage
 
     if len(x) == 0 or len(span_ends) == 0:
@@ -164,7 +193,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         height = max(height, float(np.max(span_end_hag[owner == k])))
         standing = structure & (top >= 0.5 * height)  # legs and body reach up to the head; bushes do not
         body = _grow_body(cells, standing.reshape(rows, cols), centres, np.array([cx, cy]), arm)
-        if not passed and not _under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
+        if not passed and not under_its_lines(cx, cy, centres[body], lines_xy, end_radius_m, under_line_m,
                                                max_side_ratio, cell_m):
             continue
         area = len(body) * cell_m ** 2
@@ -197,11 +226,11 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
         if area <= axis_area_m2:
             # a pole (with its arms) stands on one thin column; a crown where wire pieces end
             # spreads its points over metres
-            share, _ = _axis_share(x, y, hag, bx, by, height)
+            share, _ = axis_share(x, y, hag, bx, by, height)
             if share is not None and share < min_axis_share:
                 continue
         pair = None if passed or area > 2 * axis_area_m2 else \
-            _pole_pair(x, y, hag, flat, body, height, np.asarray(span_ends, float)[owner == k],
+            pole_pair(x, y, hag, flat, body, height, np.asarray(span_ends, float)[owner == k],
                        span_end_hag[owner == k], centres, min_ends, min_axis_share, pair_apart_m)
         if pair is not None:
             # two poles side by side (a line ending at its own pole beside another line's): their
@@ -217,7 +246,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, cel
     return found
 
 
-def _pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
+def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
                min_share: float, apart_m: float, axis_m: float = 0.5, low_m: float = 3.0, head_m: float = 1.5,
                second_share: float = 0.5, min_points: int = 5, min_rise_share: float = 0.5):
     """Two poles in one candidate, or None: the body's points from ``low_m`` above ground to
@@ -263,7 +292,7 @@ def _pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres,
     return out
 
 
-def _axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: float = 0.5, low_m: float = 3.0,
+def axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: float = 0.5, low_m: float = 3.0,
                 head_m: float = 1.5):
     """The share of the points within ``radius_m`` of (``cx``, ``cy``) in plan, from ``low_m``
     above ground to ``head_m`` under ``height`` (under a pole's arms), that lie within ``axis_m``
@@ -409,14 +438,32 @@ def _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m
     return centre, 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m, height
 
 
+@dataclass(frozen=True)
+class PassedThroughRules:
+    """The thresholds of ``find_towers_passed_through`` (its docstring says what each does; the values were set
+    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
+
+    cell_m: float = 1.0
+    reach_m: float = 12.0
+    column_share: float = 0.5
+    arm_m: float = 6.0
+    max_above_m: float = 2.0
+    max_side_m: float = 40.0
+    max_rugged: float = 0.7
+    min_slenderness: float = 2.0
+    known_m: float = 10.0
+    under_line_m: float = 2.0
+    margin_m: float = 10.0
+    max_side_ratio: float = 2.0
+    insulator_m: float = 1.0
+    reach_down_share: float = 0.5
+    pole_area_m2: float = 4.0
+    max_gap_m: float = 2.0
+    wide_reach_down_share: float = 0.35
+
+
 def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, known=(),
-                               cell_m: float = 1.0, reach_m: float = 12.0, top_share: float = 0.8,
-                               column_share: float = 0.5, arm_m: float = 6.0, max_above_m: float = 2.0,
-                               max_side_m: float = 40.0, max_rugged: float = 0.7, min_slenderness: float = 2.0,
-                               known_m: float = 10.0, under_line_m: float = 2.0, margin_m: float = 10.0,
-                               max_side_ratio: float = 2.0, insulator_m: float = 1.0,
-                               reach_down_share: float = 0.5, pole_area_m2: float = 4.0,
-                               max_gap_m: float = 2.0, wide_reach_down_share: float = 0.35) -> list:
+                               top_share: float = 0.8, rules: PassedThroughRules | None = None, **overrides) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -442,9 +489,14 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     line with wire points left over it is wide); one wider than a pole reaches down to
     ``wide_reach_down_share`` (as ``find_pylons`` asks: a lattice's legs stand on the ground, a
     conifer the wires run through stands off it), and it stands
-    under its lines (``_under_its_lines``: the lines reaching within ``margin_m`` of it along
+    under its lines (``under_its_lines``: the lines reaching within ``margin_m`` of it along
     their length). n_spans counts two spans per conductor line passing within ``arm_m`` of its
     base."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or PassedThroughRules(), **overrides)
+    (cell_m, reach_m, column_share, arm_m, max_above_m, max_side_m, max_rugged, min_slenderness, known_m,
+     under_line_m, margin_m, max_side_ratio, insulator_m, reach_down_share, pole_area_m2, max_gap_m,
+     wide_reach_down_share) = dataclasses.astuple(r)
     from scipy import ndimage
 
     if len(x) == 0 or len(wire_x) == 0:
@@ -494,7 +546,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         if len(gaps) and float(own[gaps[0]]) > reach_down_share * height and \
                 len(np.unique(flat[mine & (hag < own[gaps[0]])])) * cell_m ** 2 > pole_area_m2:
             continue
-        if not _under_its_lines(centre[0], centre[1], centres[body], lines_xy, margin_m, under_line_m,
+        if not under_its_lines(centre[0], centre[1], centres[body], lines_xy, margin_m, under_line_m,
                                 max_side_ratio, cell_m):
             continue
         dist = np.array([_point_segment_distance(centre[0], centre[1], a, b) for a, b in lines_xy])
@@ -503,11 +555,26 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
     return found
 
 
+@dataclass(frozen=True)
+class PoleRules:
+    """The thresholds of ``find_poles`` (its docstring says what each does; the values were set
+    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
+
+    radius_m: float = 0.25
+    ring_m: float = 0.75
+    window_m: float = 2.0
+    min_thin_m: float = 2.5
+    min_fill: float = 0.6
+    wire_reach_m: float = 2.0
+    end_radius_m: float = 10.0
+    column_m: float = 0.45
+    voxel_m: float = 0.05
+    head_m: float = 1.8
+    max_ring_share: float = 0.6
+
+
 def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None, span_end_hag=None,
-               top_share: float = 0.8, radius_m: float = 0.25, ring_m: float = 0.75, window_m: float = 2.0,
-               min_thin_m: float = 2.5, min_fill: float = 0.6, wire_reach_m: float = 2.0, end_radius_m: float = 10.0,
-               column_m: float = 0.45, voxel_m: float = 0.05, head_m: float = 1.8,
-               max_ring_share: float = 0.6) -> list[Pylon]:
+               top_share: float = 0.8, rules: PoleRules | None = None, **overrides) -> list[Pylon]:
     """Poles that carry the wires: thin vertical columns, as a street scanner sees wooden and
     steel poles (a crown beside the pole is no part of it, a tree trunk ends in its crown).
 
@@ -527,6 +594,10 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     line's wires.
     Its top is where the column above the thin part first breaks by 1.5 m; its points are its
     column and its head (within ``head_m`` of the axis in its top metre: cross arms, insulators)."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or PoleRules(), **overrides)
+    (radius_m, ring_m, window_m, min_thin_m, min_fill, wire_reach_m, end_radius_m, column_m, voxel_m, head_m,
+     max_ring_share) = dataclasses.astuple(r)
     from scipy import ndimage
 
     if len(x) < 5 or len(wire_x) == 0:
@@ -667,7 +738,7 @@ def _passes(px, py, a, b, reach, margin):
     return margin < t < L - margin and abs((px - a[0]) * d[1] - (py - a[1]) * d[0]) / L <= reach
 
 
-def _under_its_lines(cx, cy, footprint, lines_xy, margin_m, under_line_m, max_side_ratio, cell_m) -> bool:
+def under_its_lines(cx, cy, footprint, lines_xy, margin_m, under_line_m, max_side_ratio, cell_m) -> bool:
     """Whether a tower candidate at (cx, cy), footprint cell centres ``footprint``, stands under
     the conductors ``lines_xy`` that reach within ``margin_m`` of it along their length (see
     find_pylons)."""

@@ -8,7 +8,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from .bundles import _chain_pieces, _split_bundles
+from .bundles import _chain_pieces, split_bundles
 from .catenaries import (
     ISOLATION_M,
     SIDE_BY_SIDE_MIN_GAP_M,
@@ -18,6 +18,7 @@ from .catenaries import (
     Span,
     catenary,
     fit_catenary,
+    fit_tolerance_m,
     kink_cut,
     line_fit,
     split_spans,
@@ -66,7 +67,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         z = pz[cand]
         # height, continuity and lateral position: link points close along the line, in height and
         # across it (within ALS scatter across a wire; sub-conductors of a bundle, closer than that,
-        # are told apart afterwards by _split_bundles)
+        # are told apart afterwards by split_bundles)
         # heights linked about the ground's trend along the line: wires on a hillside climb with the
         # towers, and a sparse wire's points a few metres apart on a 25 % slope differ by > z_link
         slope_z = line_fit(s, ground_z[cand])[0] if ground_z is not None else 0.0
@@ -75,7 +76,7 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(cand), len(cand))) \
             if len(pairs) else sparse.coo_matrix((len(cand), len(cand)))
         _, lab = connected_components(g, directed=False)
-        lab = _split_bundles(s, off, lab, min_points, z=z)
+        lab = split_bundles(s, off, lab, min_points, z=z)
         wire_of = _chain_pieces(s, z, lab, min_points, gap_max=6 * s_link, z_tol=z_link)
         next_wire = int(wire_of.max()) + 1 if len(wire_of) else 0
         for k in np.flatnonzero(wire_of >= 0):
@@ -87,12 +88,12 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
             n_spans = [0]
 
             def emit(sel, wire, fit):
-                spans.append(_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit, z=zk[sel]))
+                spans.append(make_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit, z=zk[sel]))
                 n_spans[0] += 1
                 z0, s0, c, rms = fit
                 if rms <= max_rms:  # points of a span that is not a wire are not wire points
                     resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
-                    on = ik[sel][resid <= max(3 * rms, 0.15)]
+                    on = ik[sel][resid <= fit_tolerance_m(rms)]
                     line_of[on], wire_of_point[on] = li, wire
 
             pieces = [(sk.min(), sk.max() + 1e-9)]
@@ -152,14 +153,14 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
                 sel = free[part]
                 if wide:
                     # (one without a gap over the first search's is what that search turned down)
-                    if np.diff(np.sort(s[sel])).max() <= 2 * s_link or not _stands_clear(xyz, sel, ISOLATION_M):
+                    if np.diff(np.sort(s[sel])).max() <= 2 * s_link or not stands_clear(xyz, sel, ISOLATION_M):
                         continue
                     sel, fit, gone = _whole_sparse_wire(sel, fit, xyz, line_of[cand] >= 0, wire_of_point[cand],
                                                         max_rms, ISOLATION_M)
                     if gone:  # stretches of it dense enough to have been fitted alone
                         spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
                         good = [sp for sp in good if sp.wire not in gone]
-                spans.append(_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
+                spans.append(make_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
                 line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
                 next_wire += 1
                 good.append(spans[-1])
@@ -177,7 +178,7 @@ def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: 
     refitted catenary, those wires); the run alone where the whole fits worse than ``max_rms``."""
     s, z = xyz[:, 0], xyz[:, 2]
     gentle = np.abs(np.sinh((s - fit[1]) / fit[2])) <= max_slope
-    on = gentle & (np.abs(catenary(s, *fit[:3]) - z) <= max(3 * fit[3], 0.15))
+    on = gentle & (np.abs(catenary(s, *fit[:3]) - z) <= fit_tolerance_m(fit[3]))
     gone = [int(w) for w in np.unique(wire_of[on & wired]) if w >= 0 and np.mean(on[wire_of == w]) >= share]
     take = on & (~wired | np.isin(wire_of, gone))
     rest = np.flatnonzero(~take)
@@ -194,7 +195,7 @@ def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: 
     return whole, whole_fit, gone
 
 
-def _stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
+def stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
     """Whether the points ``run`` (indices into ``xyz``) have on average at most ``max_around``
     other points of ``xyz`` within ``radius_m`` each."""
     others = np.setdiff1d(np.arange(len(xyz)), run)
@@ -258,7 +259,7 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
     ``bin_m`` bins). Peaks of that histogram holding ``min_points`` within ``peak_m``, their points
     running ``min_length_m`` along (gaps under ``max_gap_m``), are the wires in plan; peaks closer
     than ``min_gap_m`` are one (a bundle's sub-conductors stay one conductor per phase, as
-    ``_split_bundles`` keeps them). Only lines ``4 * min_length_m`` or longer take part (a tower's
+    ``split_bundles`` keeps them). Only lines ``4 * min_length_m`` or longer take part (a tower's
     members stay out), a wire runs along half the longest line or more, and a group is redrawn
     where it holds ``min_wires`` wires or more (two side by side the 3D step tells apart, as a
     bundle's pair) that hold ``min_share`` of its band's points (an airborne survey's scatter
@@ -474,7 +475,7 @@ def _same_wire(p: Span, q: Span, min_overlap_m: float, across_m: float) -> bool:
     s = np.array([lo, 0.5 * (lo + hi), hi])
     across = np.abs((p.offset + p.offset_slope * s) - (q.offset + q.offset_slope * s))
     height = np.abs(catenary(s, p.z0, p.s0, p.c) - catenary(s, q.z0, q.s0, q.c))
-    return bool((across <= across_m).all() and (height <= max(3 * max(p.rms, q.rms), 0.15)).all())
+    return bool((across <= across_m).all() and (height <= fit_tolerance_m(max(p.rms, q.rms))).all())
 
 
 def band_owner(lines, px, py, band: float, reach: float) -> np.ndarray:
@@ -495,7 +496,7 @@ def band_owner(lines, px, py, band: float, reach: float) -> np.ndarray:
     return owner
 
 
-def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
+def make_span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
     """The Span of a catenary ``fit`` (z0, s0, c, rms) to points at ``s`` along the line and
     ``off`` across it: its extent, sag below the chord and plan position (a straight trend).
 
@@ -512,7 +513,7 @@ def _span(line: int, wire: int, number: int, s, off, fit, z=None) -> Span:
     lateral_tol = np.inf
     if z is not None:
         dz = z - catenary(s, z0, s0, c)
-        on = np.abs(dz) <= max(3 * rms, 0.15)
+        on = np.abs(dz) <= fit_tolerance_m(rms)
         if on.sum() >= 3:
             o1, o0, lateral_tol = _refined_trend(s[on], off[on], *line_fit(s[on], off[on]))
     return Span(line, wire, number, s0, c, z0, a, b, rms, len(s), sag, float(o0), float(o1), o_rms, lateral_tol)
@@ -647,8 +648,8 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
             break
         run, (z0, s0, c, rms), (o1, o0, o_rms) = hit
         r = np.abs(catenary(ls, z0, s0, c) - lz)
-        on = (r <= max(3 * rms, 0.15)) & (ls >= ls[run].min()) & (ls <= ls[run].max()) & \
-            (np.abs(lo_ - o1 * ls - o0) <= max(3 * o_rms, 0.15))
+        on = (r <= fit_tolerance_m(rms)) & (ls >= ls[run].min()) & (ls <= ls[run].max()) & \
+            (np.abs(lo_ - o1 * ls - o0) <= fit_tolerance_m(o_rms))
         found.append((left[on], hit[1]))
         left = left[~on]
     return found

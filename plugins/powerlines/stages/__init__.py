@@ -19,8 +19,49 @@ per input point; ``settings`` (``settings.Settings``) the run's parameters and d
 
 from __future__ import annotations
 
-from . import cleaning, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection, supports
+import time
+
+from . import cleaning, ground, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection, supports
 
 CHAIN = (("plan_lines", plan_lines.stage), ("more_wires", more_wires.stage), ("rejection", rejection.stage),
          ("next_spans", next_spans.stage), ("supports", supports.stage), ("pole_wires", pole_wires.stage),
          ("cleaning", cleaning.stage), ("plan_split", plan_split.stage))
+
+
+def run_chain(pc, settings, ctx, until: str | None = None):
+    """The scene and the state after the stages up to and including ``until`` (a name of CHAIN;
+    None: all of them), each stage's seconds in ``state.timings["stage_<name>_s"]``. Only the
+    ground stage runs when the input holds too few candidates for a wire (``no_wire_possible``)."""
+    from ..state import State
+
+    st = State()
+    t = time.perf_counter()
+    scene = ground.stage(pc, settings, ctx, st.timings)
+    st.timings["stage_ground_s"] = time.perf_counter() - t
+    if until == "ground" or no_wire_possible(scene):
+        return scene, st
+    return scene, run_stages(scene, st, settings, ctx, last=until)
+
+
+def run_stages(scene, st, settings, ctx, first: str | None = None, last: str | None = None):
+    """The stages of CHAIN from ``first`` through ``last`` (None: from the first, to the last) on
+    a scene and the state the stages before ``first`` left."""
+    names = [name for name, _ in CHAIN]
+    for name in (first, last):
+        if name is not None and name not in names:
+            raise ValueError(f"no stage {name!r}; the stages after ground: {', '.join(names)}")
+    lo = names.index(first) if first else 0
+    hi = names.index(last) if last else len(names) - 1
+    for name, stage in CHAIN[lo:hi + 1]:
+        t = time.perf_counter()
+        st = stage(scene, st, settings, ctx)
+        st.timings[f"stage_{name}_s"] = time.perf_counter() - t
+        ctx.log.debug("powerlines: %s: stage %s took %.2f s", scene.pc.source, name, st.timings[f"stage_{name}_s"])
+    return st
+
+
+def no_wire_possible(scene) -> bool:
+    """Fewer candidates than a wire needs stand in the height window (a field, a road)."""
+    from ..settings import MIN_CANDIDATES
+
+    return len(scene.candidates) < MIN_CANDIDATES

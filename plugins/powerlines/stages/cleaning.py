@@ -13,11 +13,11 @@ from scipy.spatial import cKDTree
 
 from ..core import (
     WIRE_ID_BASE,
-    _span,
     along_a_surface,
     fit_catenary,
     in_a_surface,
     in_foliage,
+    make_span,
     off_their_spans,
     sibling_wires,
 )
@@ -98,6 +98,6 @@ def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, v
     spans = list(spans)
     for k, li, s, off in found:
         top[li] += 1
-        spans.append(_span(li, int(top[li]), 0, s, off, fit_catenary(s, xyz[k, 2]), xyz[k, 2]))
+        spans.append(make_span(li, int(top[li]), 0, s, off, fit_catenary(s, xyz[k, 2]), xyz[k, 2]))
         conductor_of[pool[k]], wire_of[pool[k]] = li, int(top[li])
     return spans, len(found)

@@ -11,7 +11,7 @@ import geopandas as gpd
 import numpy as np
 from shapely.geometry import LineString
 
-from ..core import _span, fit_catenary, grow_span_ends, points_on_spans, short_wires, sibling_wires
+from ..core import fit_catenary, grow_span_ends, make_span, points_on_spans, short_wires, sibling_wires
 from ..settings import MIN_SECOND_PASS
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import add_pass, keep_conductors
@@ -144,7 +144,7 @@ def straight_conductors(pc, xyz, lines_xy, hu):
         for number, run in enumerate(pieces):
             q = xyz[run]
             s, off = (q[:, :2] - a) @ d, (q[:, :2] - a) @ np.array([-d[1], d[0]])
-            spans.append(_span(li, 0, number, s, off, fit_catenary(s, q[:, 2])))
+            spans.append(make_span(li, 0, number, s, off, fit_catenary(s, q[:, 2])))
             line_of[run] = li
             n_points += len(run)
             offs.append(off)

@@ -10,7 +10,7 @@ import time
 import numpy as np
 from shapely.geometry import LineString
 
-from ..core import _span, bridge_gaps, next_spans
+from ..core import bridge_gaps, make_span, next_spans
 from ..state import CandidateLabels, State, Wires
 
 
@@ -81,7 +81,7 @@ def add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found
     cond = lines["conductors"].copy()
     for li, wire, k, s, off, fit in found:
         number[(li, wire)] += 1
-        spans.append(dataclasses.replace(_span(li, wire, number[(li, wire)], s, off, fit, z=pc.z[low[k]] * vu),
+        spans.append(dataclasses.replace(make_span(li, wire, number[(li, wire)], s, off, fit, z=pc.z[low[k]] * vu),
                                          chained=True))
         pts = low[k]
         at = pos[pts]

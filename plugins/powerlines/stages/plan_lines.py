@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from ..core import _stands_clear, band_owner, conductors_3d, ribbon_lines, thin_across, twin_lines, wire_point_spacing
+from ..core import band_owner, conductors_3d, ribbon_lines, stands_clear, thin_across, twin_lines, wire_point_spacing
 from ..plan_geometry import merge_twins, realign, redrawn_lines
 from ..settings import GAP_SPACINGS, STANDS_CLEAR_MAX
 from ..state import CandidateLabels, State, Wires
@@ -128,7 +128,7 @@ def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_shar
 
 def stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) -> bool:
     """Whether the points ``own`` (indices into ``pc``) have on average at most STANDS_CLEAR_MAX
-    other points above ``height_min_m`` within ``radius_m`` (core._stands_clear, on the points
+    other points above ``height_min_m`` within ``radius_m`` (core.stands_clear, on the points
     around them)."""
     if not len(own):
         return True
@@ -139,4 +139,4 @@ def stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) ->
     around = np.flatnonzero((x >= lo_x) & (x <= hi_x) & (y >= lo_y) & (y <= hi_y) & (hag >= height_min_m))
     around = np.union1d(around, own)
     xyz = np.column_stack([x[around], y[around], pc.z[around] * vu])
-    return _stands_clear(xyz, np.searchsorted(around, own), radius_m, STANDS_CLEAR_MAX)
+    return stands_clear(xyz, np.searchsorted(around, own), radius_m, STANDS_CLEAR_MAX)

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from ..core import _pieces_on_surfaces, catenary, core_and_ring, core_ring_contrast, span_on_surface
+from ..core import catenary, core_and_ring, core_ring_contrast, pieces_on_surfaces, span_on_surface
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import drop_spans, keep_conductors
 
@@ -70,7 +70,7 @@ def lines_not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float 
         flat = core_n = ring_n = 0
         for k, sp in numbered:
             o, dz = off - sp.offset - sp.offset_slope * s, z - catenary(s, sp.z0, sp.s0, sp.c)
-            if span_on_surface(s, o, dz, sp.s_from, sp.s_to) or _pieces_on_surfaces(s, o, dz, sp) > 0.5:
+            if span_on_surface(s, o, dz, sp.s_from, sp.s_to) or pieces_on_surfaces(s, o, dz, sp) > 0.5:
                 flat += sp.n_points
             elif below is not None and span_on_surface(
                     sb, offb - sp.offset - sp.offset_slope * sb, zb - catenary(sb, sp.z0, sp.s0, sp.c), sp.s_from,
