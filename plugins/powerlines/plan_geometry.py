@@ -221,57 +221,10 @@ def side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min
     moved = {}  # original conductor -> [(new index, offset trend (slope, intercept))]
     plan = plan_trends(spans, params)
     for li in range(len(geo)):
-        # spans along the line (within 1 deg, as runs_along) that lie at one offset: a jumper at a
-        # tower, a piece there drifting half the gap across, or one whose points are two wires'
-        # (scattered across as two wires half the gap apart would be, over the line's own wires'
-        # scatter) has its middle between their groups and would chain them into one
-        trend, agree = plan.get(li, (0.0, False))[:2]
-        lean = trend if agree else 0.0
-        along = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
-        if len(along) < 2:
+        found = _groups_across(fitting, li, plan.get(li, (0.0, False))[:2], min_gap_m, params["s_min_m"])
+        if found is None:
             continue
-        max_scatter = np.hypot(np.median([sp.offset_rms for sp in along]), 0.25 * min_gap_m)
-        mine = [sp for sp in along if sp.offset_rms <= max_scatter and
-                abs(sp.offset_slope - lean) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
-        if len(mine) < 2:
-            continue
-        # span middles' offsets about the wires' own plan trend: the Hough's line can lie across
-        # two phases at a small angle, so that one phase's offset drifts along it by a good part
-        # of the gap to the next
-        smid = np.array([0.5 * (sp.s_from + sp.s_to) for sp in mine])
-        mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - lean * smid
-        order = np.argsort(mid)
-        # runs of span offsets without a gap of half min_gap_m, then neighbouring runs whose
-        # middles lie closer than min_gap_m joined
-        runs = np.split(order, np.flatnonzero(np.diff(mid[order]) >= 0.5 * min_gap_m) + 1)
-        groups = [list(runs[0])]
-        for prev, r in zip(runs[:-1], runs[1:]):
-            if np.median(mid[r]) - np.median(mid[prev]) < min_gap_m:
-                groups[-1] += list(r)
-            else:
-                groups.append(list(r))
-        # a group is a wire along the line: S_min or more, and half the length its spans cover (a piece
-        # of a neighbouring wire at the line's end, a tower's arms and jumpers are not)
-        cover = sum(sp.s_to - sp.s_from for sp in mine)
-
-        def long_enough(parts):
-            return [g for g in parts if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
-                params["s_min_m"], 0.5 * cover / len(parts))]
-        groups = long_enough(groups) if len(groups) > 1 else groups
-        if not groups:
-            continue
-        to_centre = np.zeros(len(mine))
-        if len(groups) < 2 and np.ptp(mid[groups[0]]) > 0.5 * min_gap_m:
-            # one phase whose sub-conductors lie closer than min_gap_m in plan (a triangle
-            # bundle): its line runs through the middle of the outermost, not through its points'
-            # centroid, which a sub-conductor holding more points pulls off by centimetres (a
-            # crossing at 25 deg by 2.4 times as much); each as long as the groups above
-            wires = long_enough(runs)
-            if len(wires) < 2:
-                continue
-            centre = 0.5 * (np.median(mid[wires[0]]) + np.median(mid[wires[-1]]))
-            for r in runs:
-                to_centre[r] = centre - np.median(mid[r])
+        mine, groups, to_centre = found
         a, d, t0, t1 = geo[li]
         n = np.array([-d[1], d[0]])
         trends = []
@@ -354,6 +307,66 @@ def side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min
         g.attrs.update(src.attrs)
     return ({**lines, "conductors": cond, "conductor_segments": seg}, new_geo, spans, conductor_of, wire_of,
             len(new_geo) - len(geo))
+
+
+def _groups_across(fitting, li, trend_agree, min_gap_m: float, s_min_m: float):
+    """The fitting spans of conductor ``li`` that run along it at one offset each (``mine``), in
+    groups side by side across it (``groups``: indices into ``mine``), and per span the shift that
+    centres a phase of sub-conductors closer than ``min_gap_m`` (``to_centre``); None when the
+    line holds no such groups. ``trend_agree``: the line's plan trend and whether its spans agree
+    on it (``plan_trends``)."""
+    # spans along the line (within 1 deg, as runs_along) that lie at one offset: a jumper at a
+    # tower, a piece there drifting half the gap across, or one whose points are two wires'
+    # (scattered across as two wires half the gap apart would be, over the line's own wires'
+    # scatter) has its middle between their groups and would chain them into one
+    trend, agree = trend_agree
+    lean = trend if agree else 0.0
+    along = [sp for sp in fitting if sp.conductor == li and abs(sp.offset_slope) <= ALONG_SLOPE_MAX]
+    if len(along) < 2:
+        return None
+    max_scatter = np.hypot(np.median([sp.offset_rms for sp in along]), 0.25 * min_gap_m)
+    mine = [sp for sp in along if sp.offset_rms <= max_scatter and
+            abs(sp.offset_slope - lean) * (sp.s_to - sp.s_from) <= 0.5 * min_gap_m]
+    if len(mine) < 2:
+        return None
+    # span middles' offsets about the wires' own plan trend: the Hough's line can lie across
+    # two phases at a small angle, so that one phase's offset drifts along it by a good part
+    # of the gap to the next
+    smid = np.array([0.5 * (sp.s_from + sp.s_to) for sp in mine])
+    mid = np.array([sp.offset + sp.offset_slope * s for sp, s in zip(mine, smid)]) - lean * smid
+    order = np.argsort(mid)
+    # runs of span offsets without a gap of half min_gap_m, then neighbouring runs whose
+    # middles lie closer than min_gap_m joined
+    runs = np.split(order, np.flatnonzero(np.diff(mid[order]) >= 0.5 * min_gap_m) + 1)
+    groups = [list(runs[0])]
+    for prev, r in zip(runs[:-1], runs[1:]):
+        if np.median(mid[r]) - np.median(mid[prev]) < min_gap_m:
+            groups[-1] += list(r)
+        else:
+            groups.append(list(r))
+    # a group is a wire along the line: S_min or more, and half the length its spans cover (a piece
+    # of a neighbouring wire at the line's end, a tower's arms and jumpers are not)
+    cover = sum(sp.s_to - sp.s_from for sp in mine)
+
+    def long_enough(parts):
+        return [g for g in parts if sum(mine[k].s_to - mine[k].s_from for k in g) >= max(
+            s_min_m, 0.5 * cover / len(parts))]
+    groups = long_enough(groups) if len(groups) > 1 else groups
+    if not groups:
+        return None
+    to_centre = np.zeros(len(mine))
+    if len(groups) < 2 and np.ptp(mid[groups[0]]) > 0.5 * min_gap_m:
+        # one phase whose sub-conductors lie closer than min_gap_m in plan (a triangle
+        # bundle): its line runs through the middle of the outermost, not through its points'
+        # centroid, which a sub-conductor holding more points pulls off by centimetres (a
+        # crossing at 25 deg by 2.4 times as much); each as long as the groups above
+        wires = long_enough(runs)
+        if len(wires) < 2:
+            return None
+        centre = 0.5 * (np.median(mid[wires[0]]) + np.median(mid[wires[-1]]))
+        for r in runs:
+            to_centre[r] = centre - np.median(mid[r])
+    return mine, groups, to_centre
 
 
 def wire_reach_of(cond, conductor_of, pc, hu: float) -> list:

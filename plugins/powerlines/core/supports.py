@@ -122,53 +122,19 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
      max_side_ratio, along_deg, max_height_share, arm_m, reach_down_share, pole_area_m2, over_wires_share,
      over_wires_reach_down_share, min_axis_share, axis_area_m2, pair_apart_m, one_tower_m2,
      peak_reach_m) = dataclasses.astuple(r)
-    from scipy import ndimage
-
     if len(x) == 0 or len(span_ends) == 0:
         return []
     g = _tower_grid(x, y, hag, lines_xy, reach_m, cell_m)
     if g is None:
         return []
     x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols), top_held = g
-    has = np.isfinite(top)
     wire_near = None if wire_xyh is None or not len(wire_xyh[0]) else \
         _wires_over_cells((x0, y0, cell_m, rows, cols), *wire_xyh, arm_m)[1]
-    wire_top = np.zeros(rows * cols)
     span_end_hag = np.asarray(span_end_hag, float)
-    ends = cKDTree(np.asarray(span_ends, float))
-    idx = np.flatnonzero(has)
-    # the lowest span end around: the earth wire's end over a lattice tower's peak is nearer its
-    # middle cells than the phases' ends at its arms, and only the peak reaches that high
-    pairs = cKDTree(centres[idx]).sparse_distance_matrix(ends, end_radius_m, output_type="ndarray")
-    lowest = np.full(len(idx), np.inf)
-    np.minimum.at(lowest, pairs["i"], span_end_hag[pairs["j"]])
-    hit = np.isfinite(lowest)
-    wire_top[idx[hit]] = lowest[hit]
-    tall = has & (wire_top > 0) & (top >= top_share * wire_top)
-    column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
-    structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms
-    lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
-    lab = lab.ravel()
-    shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
-    for k in range(1, n + 1):
-        cells = _shaped_bodies(np.flatnonzero(lab == k), column, (rows, cols), centres,
-                               lambda c: _tower_shaped(c, x, y, hag, flat, top, top_held, column, centres, cell_m,
-                                                       max_side_m, min_slenderness, max_rugged) is not None)
-        got = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
-                            min_slenderness, max_rugged)
-        if got is not None:  # (centre, how far out the wires may hang, height)
-            shaped.append((cells, *got))
-    if not shaped:
+    got = _shaped_candidates(g, span_ends, span_end_hag, top_share, r)
+    if got is None:
         return []
-    # each span end belongs to the nearest candidate that reaches it (a tree beside a pole does
-    # not count the pole's span ends)
-    cxy = np.array([c for _, c, _, _ in shaped])
-    reach = np.array([max(end_radius_m, a) for _, _, a, _ in shaped])
-    d_end = np.hypot(*(np.asarray(span_ends, float)[:, None, :] - cxy[None, :, :]).transpose(2, 0, 1))
-    # nor the ends of wires held far over its top (another line's, lost in the view beside it)
-    can_hold = span_end_hag[:, None] * top_share <= np.array([h for _, _, _, h in shaped])[None, :]
-    d_end = np.where((d_end <= reach[None, :]) & can_hold, d_end, np.inf)
-    owner = np.where(np.isfinite(d_end.min(axis=1)), d_end.argmin(axis=1), -1)
+    shaped, owner, column, structure = got
     found = []
     for k, (cells, (cx, cy), arm, height) in enumerate(shaped):
         n_ends = int(np.sum(owner == k))
@@ -244,6 +210,55 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
             Pylon(bx, by, height, n_ends, heading, body,
                   (x0, y0, cell_m, rows, cols)))
     return found
+
+
+def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRules):
+    """``find_pylons``'s candidates on its grid ``g`` (``_tower_grid``'s): tall cells joined into
+    bodies shaped like a tower, and the span ends each owns. Returns (shaped: [(cells, centre,
+    arm reach, height)], owner per span end (-1: none), the column and structure cell masks), or
+    None when no body is shaped like a tower."""
+    from scipy import ndimage
+
+    x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols), top_held = g
+    cell_m, end_radius_m, column_share = r.cell_m, r.end_radius_m, r.column_share
+    max_side_m, min_slenderness, max_rugged = r.max_side_m, r.min_slenderness, r.max_rugged
+    has = np.isfinite(top)
+    wire_top = np.zeros(rows * cols)
+    ends = cKDTree(np.asarray(span_ends, float))
+    idx = np.flatnonzero(has)
+    # the lowest span end around: the earth wire's end over a lattice tower's peak is nearer its
+    # middle cells than the phases' ends at its arms, and only the peak reaches that high
+    pairs = cKDTree(centres[idx]).sparse_distance_matrix(ends, end_radius_m, output_type="ndarray")
+    lowest = np.full(len(idx), np.inf)
+    np.minimum.at(lowest, pairs["i"], span_end_hag[pairs["j"]])
+    hit = np.isfinite(lowest)
+    wire_top[idx[hit]] = lowest[hit]
+    tall = has & (wire_top > 0) & (top >= top_share * wire_top)
+    column = tall & (n_layers >= np.maximum(3, column_share * (top - 3.0)))  # 3 m of it at least
+    structure = has & (n_layers >= 3)  # something standing at least 3 m above 3 m: legs, body, arms
+    lab, n = ndimage.label(tall.reshape(rows, cols), structure=np.ones((3, 3), bool))
+    lab = lab.ravel()
+    shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
+    for k in range(1, n + 1):
+        cells = _shaped_bodies(np.flatnonzero(lab == k), column, (rows, cols), centres,
+                               lambda c: _tower_shaped(c, x, y, hag, flat, top, top_held, column, centres, cell_m,
+                                                       max_side_m, min_slenderness, max_rugged) is not None)
+        got = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
+                            min_slenderness, max_rugged)
+        if got is not None:  # (centre, how far out the wires may hang, height)
+            shaped.append((cells, *got))
+    if not shaped:
+        return None
+    # each span end belongs to the nearest candidate that reaches it (a tree beside a pole does
+    # not count the pole's span ends)
+    cxy = np.array([c for _, c, _, _ in shaped])
+    reach = np.array([max(end_radius_m, a) for _, _, a, _ in shaped])
+    d_end = np.hypot(*(np.asarray(span_ends, float)[:, None, :] - cxy[None, :, :]).transpose(2, 0, 1))
+    # nor the ends of wires held far over its top (another line's, lost in the view beside it)
+    can_hold = span_end_hag[:, None] * top_share <= np.array([h for _, _, _, h in shaped])[None, :]
+    d_end = np.where((d_end <= reach[None, :]) & can_hold, d_end, np.inf)
+    owner = np.where(np.isfinite(d_end.min(axis=1)), d_end.argmin(axis=1), -1)
+    return shaped, owner, column, structure
 
 
 def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
