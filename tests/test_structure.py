@@ -14,7 +14,6 @@ MAX_POWERLINE_PARAMETERS = 12
 MAX_PLUGIN_FILE_LINES = 1200
 # (file, function): what is over a limit today, to be split (#76)
 DEBT = {
-    ("lines", "plugins/synthetic_scene/generator/scene.py", "make_scene"),
     ("params", "plugins/powerlines/core/wires_3d.py", "conductors_3d"),
     ("params", "plugins/powerlines/core/wires_3d.py", "ribbon_lines"),
     ("params", "plugins/powerlines/core/wires_3d.py", "_ribbon_group"),

@@ -142,26 +142,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     taken = np.zeros(n_pulses, bool)
 
     # buildings (single returns on the roof)
-    plane_base = 0
-    for b in buildings:
-        inside = b.contains(u, v) & ~taken
-        zr, face = b.roof_height(u[inside], v[inside])
-        i_in = np.flatnonzero(inside)
-        roof_hit, nret = np.ones(len(zr), bool), np.ones(len(zr), np.uint8)
-        if n_eave_trees:  # a crown over the eave: its top is the first return, the roof (if reached) the last
-            cz, ck = _crown_top(trees, len(trees) - n_eave_trees, u[inside], v[inside])
-            over = cz > zr + 0.1
-            roof_hit = ~over | (rng.uniform(0, 1, len(zr)) < 0.5)
-            nret = np.where(over & roof_hit, 2, 1)
-            pts.add(u[i_in[over]], v[i_in[over]], cz[over] - np.abs(rng.normal(0, 0.2, over.sum())),
-                    trees.asprs[ck[over]], 1, nret[over], pulse_id[i_in[over]], obj=trees.first_id + ck[over],
-                    intensity=rng.integers(150, 600, over.sum()))
-        h = i_in[roof_hit]
-        pts.add(u[h], v[h], zr[roof_hit] + rng.normal(0, noise_m, len(h)), BUILDING, nret[roof_hit], nret[roof_hit],
-                pulse_id[h], obj=b.id, plane=np.where(face[roof_hit] >= 0, plane_base + face[roof_hit], -1), intensity=rng.integers(900, 1400, len(h)))
-        b._plane_base = plane_base
-        plane_base += len(b.faces)
-        taken |= inside
+    _roof_returns(pts, buildings, trees, n_eave_trees, u, v, taken, pulse_id, rng, noise_m)
 
     # bridge deck
     if terrain.embankment is not None and terrain.embankment.bridge_at is not None:
@@ -179,50 +160,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
 
     # vegetation: multiple returns
     if len(trees):
-        from scipy.spatial import cKDTree
-
-        tree_index = cKDTree(np.column_stack([trees.u, trees.v]))
-        free = np.flatnonzero(~taken)
-        k = min(4, len(trees))
-        dist, idx = tree_index.query(np.column_stack([u[free], v[free]]), k=k, distance_upper_bound=float(trees.radius.max()))
-        dist = dist.reshape(len(free), k)
-        idx = idx.reshape(len(free), k)
-        best_top = np.full(len(free), -np.inf)
-        best_k = np.full(len(free), -1)
-        for j in range(k):
-            ok = idx[:, j] < len(trees)
-            kk = np.where(ok, idx[:, j], 0)
-            inside = ok & (dist[:, j] < trees.radius[kk])
-            ztop, _ = trees.surfaces(kk, dist[:, j])
-            better = inside & (ztop > best_top)
-            best_top = np.where(better, ztop, best_top)
-            best_k = np.where(better, kk, best_k)
-        hit = best_k >= 0
-        pi = free[hit]
-        tk = best_k[hit]
-        r = np.hypot(u[pi] - trees.u[tk], v[pi] - trees.v[tk])
-        ztop, zbot = trees.surfaces(tk, r)
-        n_ret = rng.choice([1, 2, 3, 4], size=len(pi), p=[0.25, 0.35, 0.28, 0.12])
-        reaches_ground = (n_ret >= 2) & (rng.uniform(0, 1, len(pi)) < np.where(trees.conifer[tk], 0.45, 0.6))
-        n_veg = n_ret - reaches_ground
-        first = ztop - np.abs(rng.normal(0, 0.25, len(pi)))
-        first = np.maximum(first, zbot)
-        cls = trees.asprs[tk]
-        for rnum in range(1, 5):
-            sel = n_veg >= rnum
-            if not sel.any():
-                continue
-            if rnum == 1:
-                zz = first[sel]
-            else:  # inside the crown, lower with each return
-                frac = np.sort(rng.uniform(0, 1, (sel.sum(), 3)), axis=1)[:, rnum - 2]
-                zz = first[sel] - frac * (first[sel] - zbot[sel])
-            pts.add(u[pi[sel]], v[pi[sel]], zz + rng.normal(0, noise_m, sel.sum()), cls[sel], rnum, n_ret[sel],
-                    pulse_id[pi[sel]], obj=trees.first_id + tk[sel], intensity=rng.integers(150, 600, sel.sum()))
-        g = reaches_ground
-        pts.add(u[pi[g]], v[pi[g]], zg[pi[g]] + rng.normal(0, noise_m, g.sum()), GROUND, n_ret[g], n_ret[g],
-                pulse_id[pi[g]], intensity=rng.integers(100, 400, g.sum()))
-        taken[pi] = True
+        _vegetation_returns(pts, trees, u, v, zg, taken, pulse_id, rng, noise_m)
 
     # open ground
     og = ~taken
@@ -273,6 +211,58 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     UU, VV = np.meshgrid(cu, cv)
     dtm = terrain.height(UU, VV).astype(np.float32)
 
+    _object_truth(truth, buildings, trees, terrain, allp, origin)
+    _crossings(truth)
+    if scanner == "mobile":  # what the thinning left of each span
+        for sp in truth["spans"]:
+            a, b = np.asarray(sp["a"][:2]) - origin, np.asarray(sp["b"][:2]) - origin
+            t = ((allp["u"] - a[0]) * (b - a)[0] + (allp["v"] - a[1]) * (b - a)[1]) / max(sp["length_m"], 1e-9) ** 2
+            sp["n_points"] = int(np.sum((allp["obj"] == sp["wire_id"]) & (t >= 0) & (t < 1)))
+        truth["scanner"] = {"kind": "mobile", "track": _track(lines[0], track_offset_m, origin),
+                            "height_over_ground_m": MOBILE_TRACK_HEIGHT_M, "full_density_range_m": full_density_range_m}
+    u_all, v_all = allp["u"], allp["v"]
+    cls_all = allp["cls"]
+    vals, counts = np.unique(cls_all, return_counts=True)
+    truth["class_counts"] = {int(a): int(b) for a, b in zip(vals, counts)}
+    truth["n_points"] = int(len(u_all))
+    truth["n_pulses"] = int(n_pulses)
+    return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
+                 dtm_resolution_m, truth, terrain)
+
+
+MOBILE_TRACK_HEIGHT_M = 2.0  # a car-mounted scanner's head over the road
+
+
+def _roof_returns(pts, buildings, trees, n_eave_trees: int, u, v, taken, pulse_id, rng, noise_m: float) -> None:
+    """The pulses not ``taken`` that fall on a roof: one return (two under a crown over the eave,
+    the last ``n_eave_trees`` trees), with the roof plane's id, added to ``pts``; each building's
+    ``_plane_base`` set; ``taken`` marks them."""
+    plane_base = 0
+    for b in buildings:
+        inside = b.contains(u, v) & ~taken
+        zr, face = b.roof_height(u[inside], v[inside])
+        i_in = np.flatnonzero(inside)
+        roof_hit, nret = np.ones(len(zr), bool), np.ones(len(zr), np.uint8)
+        if n_eave_trees:  # a crown over the eave: its top is the first return, the roof (if reached) the last
+            cz, ck = _crown_top(trees, len(trees) - n_eave_trees, u[inside], v[inside])
+            over = cz > zr + 0.1
+            roof_hit = ~over | (rng.uniform(0, 1, len(zr)) < 0.5)
+            nret = np.where(over & roof_hit, 2, 1)
+            pts.add(u[i_in[over]], v[i_in[over]], cz[over] - np.abs(rng.normal(0, 0.2, over.sum())),
+                    trees.asprs[ck[over]], 1, nret[over], pulse_id[i_in[over]], obj=trees.first_id + ck[over],
+                    intensity=rng.integers(150, 600, over.sum()))
+        h = i_in[roof_hit]
+        pts.add(u[h], v[h], zr[roof_hit] + rng.normal(0, noise_m, len(h)), BUILDING, nret[roof_hit], nret[roof_hit],
+                pulse_id[h], obj=b.id, plane=np.where(face[roof_hit] >= 0, plane_base + face[roof_hit], -1), intensity=rng.integers(900, 1400, len(h)))
+        b._plane_base = plane_base
+        plane_base += len(b.faces)
+        taken |= inside
+
+
+def _object_truth(truth: dict, buildings, trees, terrain, allp: dict, origin) -> None:
+    """The truth records of the buildings (and their roof planes with the points on each), the
+    trees, the water and the bridge, in world coordinates (``origin`` added)."""
+    ox, oy = origin
     for b in buildings:
         truth["buildings"].append({
             "id": b.id, "roof": b.roof, "footprint": (b.footprint_uv() + origin).tolist(),
@@ -308,25 +298,55 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         e = terrain.embankment
         truth["bridge"] = {"axis": [[e.p0[0] + ox, e.p0[1] + oy], [e.p1[0] + ox, e.p1[1] + oy]],
                            "opening_at_m": e.bridge_at, "height_m": e.height_m}
-    _crossings(truth)
-    if scanner == "mobile":  # what the thinning left of each span
-        for sp in truth["spans"]:
-            a, b = np.asarray(sp["a"][:2]) - origin, np.asarray(sp["b"][:2]) - origin
-            t = ((allp["u"] - a[0]) * (b - a)[0] + (allp["v"] - a[1]) * (b - a)[1]) / max(sp["length_m"], 1e-9) ** 2
-            sp["n_points"] = int(np.sum((allp["obj"] == sp["wire_id"]) & (t >= 0) & (t < 1)))
-        truth["scanner"] = {"kind": "mobile", "track": _track(lines[0], track_offset_m, origin),
-                            "height_over_ground_m": MOBILE_TRACK_HEIGHT_M, "full_density_range_m": full_density_range_m}
-    u_all, v_all = allp["u"], allp["v"]
-    cls_all = allp["cls"]
-    vals, counts = np.unique(cls_all, return_counts=True)
-    truth["class_counts"] = {int(a): int(b) for a, b in zip(vals, counts)}
-    truth["n_points"] = int(len(u_all))
-    truth["n_pulses"] = int(n_pulses)
-    return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
-                 dtm_resolution_m, truth, terrain)
 
 
-MOBILE_TRACK_HEIGHT_M = 2.0  # a car-mounted scanner's head over the road
+def _vegetation_returns(pts, trees, u, v, zg, taken, pulse_id, rng, noise_m: float) -> None:
+    """The pulses (``u``, ``v``; ground ``zg``) not ``taken`` that fall in a crown: up to four
+    returns through it, some reaching the ground, added to ``pts``; ``taken`` marks them."""
+    from scipy.spatial import cKDTree
+
+    tree_index = cKDTree(np.column_stack([trees.u, trees.v]))
+    free = np.flatnonzero(~taken)
+    k = min(4, len(trees))
+    dist, idx = tree_index.query(np.column_stack([u[free], v[free]]), k=k, distance_upper_bound=float(trees.radius.max()))
+    dist = dist.reshape(len(free), k)
+    idx = idx.reshape(len(free), k)
+    best_top = np.full(len(free), -np.inf)
+    best_k = np.full(len(free), -1)
+    for j in range(k):
+        ok = idx[:, j] < len(trees)
+        kk = np.where(ok, idx[:, j], 0)
+        inside = ok & (dist[:, j] < trees.radius[kk])
+        ztop, _ = trees.surfaces(kk, dist[:, j])
+        better = inside & (ztop > best_top)
+        best_top = np.where(better, ztop, best_top)
+        best_k = np.where(better, kk, best_k)
+    hit = best_k >= 0
+    pi = free[hit]
+    tk = best_k[hit]
+    r = np.hypot(u[pi] - trees.u[tk], v[pi] - trees.v[tk])
+    ztop, zbot = trees.surfaces(tk, r)
+    n_ret = rng.choice([1, 2, 3, 4], size=len(pi), p=[0.25, 0.35, 0.28, 0.12])
+    reaches_ground = (n_ret >= 2) & (rng.uniform(0, 1, len(pi)) < np.where(trees.conifer[tk], 0.45, 0.6))
+    n_veg = n_ret - reaches_ground
+    first = ztop - np.abs(rng.normal(0, 0.25, len(pi)))
+    first = np.maximum(first, zbot)
+    cls = trees.asprs[tk]
+    for rnum in range(1, 5):
+        sel = n_veg >= rnum
+        if not sel.any():
+            continue
+        if rnum == 1:
+            zz = first[sel]
+        else:  # inside the crown, lower with each return
+            frac = np.sort(rng.uniform(0, 1, (sel.sum(), 3)), axis=1)[:, rnum - 2]
+            zz = first[sel] - frac * (first[sel] - zbot[sel])
+        pts.add(u[pi[sel]], v[pi[sel]], zz + rng.normal(0, noise_m, sel.sum()), cls[sel], rnum, n_ret[sel],
+                pulse_id[pi[sel]], obj=trees.first_id + tk[sel], intensity=rng.integers(150, 600, sel.sum()))
+    g = reaches_ground
+    pts.add(u[pi[g]], v[pi[g]], zg[pi[g]] + rng.normal(0, noise_m, g.sum()), GROUND, n_ret[g], n_ret[g],
+            pulse_id[pi[g]], intensity=rng.integers(100, 400, g.sum()))
+    taken[pi] = True
 
 
 def _track_frame(line, offset_m):
