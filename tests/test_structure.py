@@ -15,16 +15,9 @@ MAX_PLUGIN_FILE_LINES = 1200
 # (file, function): what is over a limit today, to be split (#76)
 DEBT = {
     ("params", "plugins/powerlines/core/wires_3d.py", "conductors_3d"),
-    ("params", "plugins/powerlines/core/wires_3d.py", "ribbon_lines"),
     ("params", "plugins/powerlines/core/wires_3d.py", "_ribbon_group"),
-    ("params", "plugins/powerlines/core/wires_3d.py", "peel_catenaries"),
-    ("params", "plugins/powerlines/core/missed_wires.py", "short_wires"),
-    ("params", "plugins/powerlines/core/missed_wires.py", "sibling_wires"),
-    ("params", "plugins/powerlines/core/spans.py", "grow_span_ends"),
     ("params", "plugins/powerlines/core/spans.py", "next_spans"),
-    ("params", "plugins/powerlines/core/clutter.py", "in_foliage"),
     ("params", "plugins/powerlines/core/clutter.py", "in_a_surface"),
-    ("params", "plugins/powerlines/core/clutter.py", "along_a_surface"),
     ("params", "plugins/powerlines/core/supports.py", "pole_pair"),
     ("params", "plugins/powerlines/core/supports.py", "_tower_shaped"),
     ("params", "plugins/powerlines/stages/supports.py", "pylons_layer"),

@@ -33,7 +33,6 @@ from .candidates import (  # noqa: F401
 )
 from .catenaries import (  # noqa: F401
     FIT_TOLERANCE_FLOOR_M,
-    fit_tolerance_m,
     ISOLATION_M,
     MAX_NEIGHBOUR_PAIRS,
     N_BEST_LINES,
@@ -47,6 +46,7 @@ from .catenaries import (  # noqa: F401
     Span,
     catenary,
     fit_catenary,
+    fit_tolerance_m,
     kink_cut,
     line_fit,
     median_line_fit,
@@ -54,6 +54,8 @@ from .catenaries import (  # noqa: F401
     split_spans,
 )
 from .clutter import (  # noqa: F401
+    AlongSurfaceRules,
+    FoliageRules,
     along_a_surface,
     core_and_ring,
     core_and_ring_masks,
@@ -63,6 +65,8 @@ from .clutter import (  # noqa: F401
     off_their_spans,
 )
 from .missed_wires import (  # noqa: F401
+    ShortWireRules,
+    SiblingRules,
     SetNeighbours,
     ball_pairs,
     short_wires,
@@ -71,6 +75,7 @@ from .missed_wires import (  # noqa: F401
     wires_from_poles,
 )
 from .spans import (  # noqa: F401
+    GrowRules,
     bridge_gaps,
     grow_span_ends,
     next_spans,
@@ -84,6 +89,9 @@ from .support_ends import (  # noqa: F401
     ends_at_supports,
 )
 from .supports import (  # noqa: F401
+    PassedThroughRules,
+    PoleRules,
+    TowerRules,
     Pylon,
     _tower_shaped,
     axis_share,
@@ -96,6 +104,8 @@ from .supports import (  # noqa: F401
     under_its_lines,
 )
 from .wires_3d import (  # noqa: F401
+    PeelRules,
+    RibbonRules,
     _ribbon_group,
     alone_beside_wires,
     band_owner,

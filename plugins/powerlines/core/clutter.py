@@ -3,6 +3,9 @@ along a surface."""
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -80,8 +83,18 @@ def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
     return off_trend
 
 
-def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, window_m: float = 1.0,
-               min_contrast: float = 4.0, min_sides: int = 5, margin_m: float = 0.5, around_tree=None) -> np.ndarray:
+@dataclass(frozen=True)
+class FoliageRules:
+    """The thresholds of ``in_foliage`` (its docstring says what each does)."""
+
+    window_m: float = 1.0
+    min_contrast: float = 4.0
+    min_sides: int = 5
+    margin_m: float = 0.5
+
+
+def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_tree=None,
+               rules: FoliageRules | None = None, **overrides) -> np.ndarray:
     """Per wire point (``line_of``, ``wire_of`` its conductor and wire; -1: none): whether it lies
     where its wire runs through foliage that hides it. Within ``window_m`` along the wire, the
     points ``around_xyz`` (all those off the ground) 0.2-0.5 m from its spans' curve are no
@@ -92,6 +105,9 @@ def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aroun
     more away spans at most 4 (an arc of 2 arccos(0.2 / 0.5) = 132 degrees). A point on no
     fitting span of its wire is kept. ``lines`` as for conductors_3d; ``around_tree``: a k-d tree
     of ``around_xyz`` already built."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or FoliageRules(), **overrides)
+    (window_m, min_contrast, min_sides, margin_m) = dataclasses.astuple(r)
     foliage = np.zeros(len(px), bool)
     if not len(around_xyz) or not (line_of >= 0).any():
         return foliage
@@ -182,10 +198,25 @@ def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aro
     return {li for li in core_n if core_n[li] + ring_n[li] and core_ring_contrast(core_n[li], ring_n[li]) < min_contrast}
 
 
-def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, around_wire,
-                    reach_m: float = 3.0, inner_m: float = 0.5, tol_m: float = 0.1, slab_m: float = 0.5,
-                    max_slope_deg: float = 60.0, min_share: float = 0.7, bin_m: float = 0.25, min_fill: float = 0.7,
-                    min_cover: float = 0.5, min_points: int = 10, margin_m: float = 0.5, around_tree=None) -> set:
+@dataclass(frozen=True)
+class AlongSurfaceRules:
+    """The thresholds of ``along_a_surface`` (its docstring says what each does)."""
+
+    reach_m: float = 3.0
+    inner_m: float = 0.5
+    tol_m: float = 0.1
+    slab_m: float = 0.5
+    max_slope_deg: float = 60.0
+    min_share: float = 0.7
+    bin_m: float = 0.25
+    min_fill: float = 0.7
+    min_cover: float = 0.5
+    min_points: int = 10
+    margin_m: float = 0.5
+
+
+def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_wire, around_tree=None,
+                    rules: AlongSurfaceRules | None = None, **overrides) -> set:
     """Lines (indices into ``lines``) each of whose wires lies along a surface reaching out from
     it: on one side, ``inner_m`` to ``reach_m`` across, the points ``around_xyz`` (off the
     ground; those on other wires left out, ``around_wire`` as for ``in_a_surface``) lie in a
@@ -199,6 +230,10 @@ def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
     each 0.25 m bin of ``span_on_surface`` alone (their union covers the wire). A crown scatters
     about any plane (a fifth of its points in the slab are that close), and a roof or hedge a
     long wire passes covers a stretch of it only."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or AlongSurfaceRules(), **overrides)
+    (reach_m, inner_m, tol_m, slab_m, max_slope_deg, min_share, bin_m, min_fill, min_cover, min_points,
+     margin_m) = dataclasses.astuple(r)
     if not len(around_xyz) or not (line_of >= 0).any():
         return set()
     tree = around_tree if around_tree is not None else cKDTree(around_xyz)

@@ -3,6 +3,9 @@ sibling phases beside a fitted span."""
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
@@ -64,10 +67,20 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
     return out
 
 
-def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wired: np.ndarray, min_length_m: float,
-                max_gap_m: float, max_around: float = 0.5, reach_m: float = 5.0,
-                structure_m: float = 1.5, stack_m: float = 1.5, max_stack_deg: float = 10.0, tol_m: float = 0.08,
-                n_searched: int | None = None, wire_like: np.ndarray | None = None) -> list[np.ndarray]:
+@dataclass(frozen=True)
+class ShortWireRules:
+    """The thresholds of ``short_wires`` (its docstring says what each does)."""
+
+    max_around: float = 0.5
+    reach_m: float = 5.0
+    structure_m: float = 1.5
+    stack_m: float = 1.5
+    max_stack_deg: float = 10.0
+    tol_m: float = 0.08
+
+
+def short_wires(xyz, off_ground, steep, wired, min_length_m, max_gap_m, n_searched: int | None = None,
+                wire_like: np.ndarray | None = None, rules: ShortWireRules | None = None, **overrides) -> list[np.ndarray]:
     """The ``straight_wires`` runs (within ``tol_m``) of ``xyz`` (wire-like points on no wire)
     that are wires seen over a few metres, given the points off the ground (``wire_like``: which
     of them are), those of structures (``steep``: poles, tower bodies) and those of the wires
@@ -90,6 +103,9 @@ def short_wires(xyz: np.ndarray, off_ground: np.ndarray, steep: np.ndarray, wire
     each other, each standing alone, are kept when one of them joins the wires found. Beside
     each run kept (within ``stack_m`` of its axis, along it), the rest of its stack is runs of
     half its length as parallel, standing alone, searched among all of ``xyz``."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or ShortWireRules(), **overrides)
+    (max_around, reach_m, structure_m, stack_m, max_stack_deg, tol_m) = dataclasses.astuple(r)
     if not len(wired):
         return []
     runs = straight_wires(xyz[:n_searched], min_length_m, max_gap_m, tol_m=tol_m)
@@ -271,11 +287,24 @@ def _stands_alone(q, around: _Around, max_around: float) -> bool:
     return int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= length) & ~stacked).sum()) < max_around * len(q)
 
 
-def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, min_span_m: float, owner=None,
-                  owner_length=None, max_sep_m: float = 4.0, max_dz_m: float = 3.0, bin_m: float = 0.1, tol_m: float = 0.15,
-                  min_points: int = 12, min_cover: float = 0.5, cover_bin_m: float = 2.0,
-                  max_rounds: int = 6, stacked: bool = False, max_around: float = 0.5,
-                  plane_m: float = 0.16) -> list:
+@dataclass(frozen=True)
+class SiblingRules:
+    """The thresholds of ``sibling_wires`` (its docstring says what each does)."""
+
+    max_sep_m: float = 4.0
+    max_dz_m: float = 3.0
+    bin_m: float = 0.1
+    tol_m: float = 0.15
+    min_points: int = 12
+    min_cover: float = 0.5
+    cover_bin_m: float = 2.0
+    max_rounds: int = 6
+    max_around: float = 0.5
+    plane_m: float = 0.16
+
+
+def sibling_wires(spans, lines, px, py, pz, max_rms, min_sep_m, min_span_m, owner=None, owner_length=None,
+                  stacked: bool = False, rules: SiblingRules | None = None, **overrides) -> list:
     """Wires hanging beside a fitted span, too sparse for the Hough and the 3D step to find alone
     (a mobile scanner's view of the far phase of a line crossing its street, 10-45 m away): the
     phases of one line hang side by side, parallel, with nearly the same sag, so beside each
@@ -301,6 +330,10 @@ def sibling_wires(spans, lines, px, py, pz, max_rms: float, min_sep_m: float, mi
     has the rest of the crowns around it).
     Returns [(indices into p*, line index, s of those points, offset across)] per wire found.
     ``lines`` as for conductors_3d."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or SiblingRules(), **overrides)
+    (max_sep_m, max_dz_m, bin_m, tol_m, min_points, min_cover, cover_bin_m, max_rounds, max_around,
+     plane_m) = dataclasses.astuple(r)
     found = []
     taken = np.zeros(len(px), bool)
     if owner is None:

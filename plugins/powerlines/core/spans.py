@@ -3,6 +3,9 @@ gaps bridged along one catenary."""
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -114,9 +117,21 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
     return line_of, wire_of
 
 
-def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float,
-                   lateral_m: float = 0.25, column_m: float = 0.3, column_dz_m: float = 1.0, own_m: float = 4.0,
-                   supports=None, support_m: float = 2.0, margin_m: float = 0.5, stack_m: float = 1.5):
+@dataclass(frozen=True)
+class GrowRules:
+    """The thresholds of ``grow_span_ends`` (its docstring says what each does)."""
+
+    lateral_m: float = 0.25
+    column_m: float = 0.3
+    column_dz_m: float = 1.0
+    own_m: float = 4.0
+    support_m: float = 2.0
+    margin_m: float = 0.5
+    stack_m: float = 1.5
+
+
+def grow_span_ends(spans, lines, px, py, pz, free, max_rms, max_gap_m, reach_m, supports=None,
+                   rules: GrowRules | None = None, **overrides):
     """For points outside the 3D step's candidates (under the height window, or left by the shape
     test next to a tower where a wire's neighbourhood leans on the structure): the conductor and
     wire of the fitted span whose catenary, continued past either end, they extend, else -1.
@@ -134,6 +149,9 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: fl
     support within ``reach_m`` along the line and ``support_m`` across the wire grow, up to
     ``margin_m`` before it, with no column test: in a sparse stack the other wires' few points
     per column make the ratio noise, and the support, once found, tells where the wire ends."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or GrowRules(), **overrides)
+    (lateral_m, column_m, column_dz_m, own_m, support_m, margin_m, stack_m) = dataclasses.astuple(r)
     line_of = np.full(len(px), -1, np.int64)
     wire_of = np.full(len(px), -1, np.int64)
     best = np.full(len(px), np.inf)

@@ -3,6 +3,9 @@ ribbons of wires side by side redrawn, twin lines, catenaries peeled one at a ti
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
@@ -242,10 +245,23 @@ def alone_beside_wires(xyz, wire, free, reach_m: float = 0.5, near_m: float = 0.
     return taken, root[taken]
 
 
-def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: float,
-                 min_gap_m: float = SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5, search_deg: float = 0.2,
-                 step_deg: float = 0.005, bin_m: float = 0.02, peak_m: float = 0.06, min_points: int = 20,
-                 match_m: float = 0.05, min_wires: int = 3, min_share: float = 0.75):
+@dataclass(frozen=True)
+class RibbonRules:
+    """The thresholds of ``ribbon_lines`` (its docstring says what each does)."""
+
+    min_gap_m: float = SIDE_BY_SIDE_MIN_GAP_M
+    max_angle_deg: float = 0.5
+    search_deg: float = 0.2
+    step_deg: float = 0.005
+    bin_m: float = 0.02
+    peak_m: float = 0.06
+    min_points: int = 20
+    match_m: float = 0.05
+    min_wires: int = 3
+    min_share: float = 0.75
+
+
+def ribbon_lines(lines, px, py, band_m, min_length_m, max_gap_m, rules: RibbonRules | None = None, **overrides):
     """The Hough's lines over a ribbon redrawn one per wire: wires side by side closer than twice
     ``band_m`` (a horizontal three-phase line 0.3-0.4 m apart) put several into one band, and the
     Hough draws a line between two of them, leaning from one to the next over the corridor
@@ -270,6 +286,10 @@ def ribbon_lines(lines, px, py, band_m: float, min_length_m: float, max_gap_m: f
     Returns (lines, source, points) with each group redrawn (source: per returned line, the index
     of the input line nearest it, whose attributes it takes; points: how many of the band's points
     a redrawn line holds, None for a line left as it was), or None where no group changed."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or RibbonRules(), **overrides)
+    (min_gap_m, max_angle_deg, search_deg, step_deg, bin_m, peak_m, min_points, match_m, min_wires,
+     min_share) = dataclasses.astuple(r)
     n = len(lines)
     if n == 0:
         return None
@@ -557,9 +577,19 @@ def span_in_frame(sp: Span, line_from, line_to, conductor: int, wire: int) -> Sp
                                offset=o0 + sp.offset * cos - c0 * slope)
 
 
-def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float, gap_m: float, tol_m: float = 0.1,
-                    lateral_tol_m: float = WIRE_LATERAL_RMS_M, max_slope: float = 0.5, n_samples: int = 2000, max_tries: int = 32,
-                    seed: int = 0):
+@dataclass(frozen=True)
+class PeelRules:
+    """The thresholds of ``peel_catenaries`` (its docstring says what each does)."""
+
+    tol_m: float = 0.1
+    lateral_tol_m: float = WIRE_LATERAL_RMS_M
+    max_slope: float = 0.5
+    n_samples: int = 2000
+    max_tries: int = 32
+    seed: int = 0
+
+
+def peel_catenaries(s, z, off, min_points, min_span, max_rms, gap_m, rules: PeelRules | None = None, **overrides):
     """Catenaries in a piece of (along-line, height) points that no single one fits, strongest
     first: a parabola through three points (a catenary's first-order form) with the most points
     within ``tol_m``, its points' longest run without a gap over ``gap_m``, a catenary refitted
@@ -569,6 +599,9 @@ def peel_catenaries(s, z, off, min_points: int, min_span: float, max_rms: float,
     its points are removed and the rest searched again. The ``max_tries`` best-supported
     parabolas are tried before giving up (RANSAC, seeded: reproducible).
     Returns [(indices into s, (z0, s0, c, rms))]."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or PeelRules(), **overrides)
+    (tol_m, lateral_tol_m, max_slope, n_samples, max_tries, seed) = dataclasses.astuple(r)
     rng = np.random.default_rng(seed)
     left = np.arange(len(s))
     found = []
