@@ -17,7 +17,6 @@ DEBT = {
     ("params", "plugins/powerlines/core/wires_3d.py", "conductors_3d"),
     ("params", "plugins/powerlines/core/wires_3d.py", "_ribbon_group"),
     ("params", "plugins/powerlines/core/spans.py", "next_spans"),
-    ("params", "plugins/powerlines/core/clutter.py", "in_a_surface"),
     ("params", "plugins/powerlines/core/supports.py", "pole_pair"),
     ("params", "plugins/powerlines/core/supports.py", "_tower_shaped"),
     ("params", "plugins/powerlines/stages/supports.py", "pylons_layer"),

@@ -56,6 +56,7 @@ from .catenaries import (  # noqa: F401
 from .clutter import (  # noqa: F401
     AlongSurfaceRules,
     FoliageRules,
+    SurfaceRules,
     along_a_surface,
     core_and_ring,
     core_and_ring_masks,
@@ -65,9 +66,9 @@ from .clutter import (  # noqa: F401
     off_their_spans,
 )
 from .missed_wires import (  # noqa: F401
+    SetNeighbours,
     ShortWireRules,
     SiblingRules,
-    SetNeighbours,
     ball_pairs,
     short_wires,
     sibling_wires,
@@ -91,8 +92,8 @@ from .support_ends import (  # noqa: F401
 from .supports import (  # noqa: F401
     PassedThroughRules,
     PoleRules,
-    TowerRules,
     Pylon,
+    TowerRules,
     _tower_shaped,
     axis_share,
     find_poles,

@@ -171,9 +171,17 @@ def _span_frame(x, y, z, anchor, direction, wire_spans, margin_m: float):
     return s, lat, dz
 
 
-def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, around_xyz, around_wire,
-                 min_contrast: float = SURFACE_CONTRAST, reach_m: float = 1.5, margin_m: float = 0.5,
-                 around_tree=None) -> set:
+@dataclass(frozen=True)
+class SurfaceRules:
+    """The thresholds of ``in_a_surface`` (its docstring says what each does)."""
+
+    min_contrast: float = SURFACE_CONTRAST
+    reach_m: float = 1.5
+    margin_m: float = 0.5
+
+
+def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_wire, around_tree=None,
+                 rules: SurfaceRules | None = None, **overrides) -> set:
     """Lines (indices into ``lines``) whose wires lie in a surface, not in free space: pooled
     over the line's wires, the points ``around_xyz`` (all those off the ground) are within 0.1 m
     of each wire's spans less than ``min_contrast`` times as dense as 0.2-0.5 m around them
@@ -184,6 +192,9 @@ def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, aro
     up in the Hough fit a catenary and pass ``in_foliage`` (nothing above them); a real wire
     through a crown is in it over a few stretches only. ``px, py, pz, line_of, wire_of``: the
     wire points, and ``around_tree``, as for ``in_foliage``."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or SurfaceRules(), **overrides)
+    (min_contrast, reach_m, margin_m) = dataclasses.astuple(r)
     if not len(around_xyz) or not (line_of >= 0).any():
         return set()
     core_n, ring_n = {}, {}
