@@ -20,14 +20,14 @@ import toolbox
 from toolbox.crossings import crossings
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # the chain's and the Hough's tests read the same scene
 def corridor(tmp_path_factory):
     d = tmp_path_factory.mktemp("corridor")
     toolbox.run("synthetic-scene", output=d / "c.laz", kind="corridor", seed=1)
     return d / "c.laz"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def corridor_result(corridor, tmp_path_factory):
     d = tmp_path_factory.mktemp("pl")
     rep = toolbox.run("powerlines", corridor, d / "pl.gpkg", outputs={"classified": str(d / "wires.laz")})

@@ -683,7 +683,7 @@ class SegmentIndex:
         none = np.full(n, -1)
         if self.tree is None or not n:
             return none, none.copy()
-        dist, j = self.tree.query(uv, k=k, distance_upper_bound=radius_px)
+        dist, j = self.tree.query(uv, k=k, distance_upper_bound=radius_px, workers=-1)  # every core: same answer
         ok = np.isfinite(dist)
         s = np.where(ok, self.sid[np.minimum(j, len(self.sid) - 1)], 0)
         dirs = self.dir[s]
