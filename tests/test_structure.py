@@ -6,6 +6,7 @@ so the list follows the code)."""
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,3 +55,26 @@ def test_the_host_imports_no_plugin():
                 assert not node.module.startswith("toolbox_plugins"), f"{path.name} imports {node.module}"
             if isinstance(node, ast.Import):
                 assert not any(n.name.startswith("toolbox_plugins") for n in node.names), path.name
+
+
+def test_rule_objects_unpack_in_their_fields_order():
+    """A function that takes its thresholds as a rule object unpacks ``dataclasses.astuple(r)``
+    into local names: those names must be the class's fields in order, or a reordered field would
+    silently hand one threshold another's value."""
+    import importlib
+
+    checked = 0
+    for path in sorted((ROOT / "plugins").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for fn in (n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)):
+            cls = next((ast.unparse(node.args[0].values[1].func) for node in ast.walk(fn)
+                        if isinstance(node, ast.Call) and ast.unparse(node.func) == "dataclasses.replace"
+                        and isinstance(node.args[0], ast.BoolOp)), None)
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Assign) and ast.unparse(node.value) == "dataclasses.astuple(r)":
+                    names = [t.id for t in node.targets[0].elts]
+                    rel = path.relative_to(ROOT / "plugins").with_suffix("").as_posix().replace("/", ".")
+                    rules = getattr(importlib.import_module(f"toolbox_plugins.{rel}"), cls)
+                    assert names == [f.name for f in dataclasses.fields(rules)], f"{path.name}:{fn.name}"
+                    checked += 1
+    assert checked >= 11

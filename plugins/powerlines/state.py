@@ -38,11 +38,6 @@ class Scene:
     def vu(self) -> float:
         return self.pc.vertical_unit_m
 
-    def xyz_m(self, ix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """x, y, z in metres of the points ``ix`` (indices or a mask)."""
-        pc = self.pc
-        return pc.x[ix] * self.hu, pc.y[ix] * self.hu, pc.z[ix] * self.vu
-
 
 @dataclass
 class Wires:
