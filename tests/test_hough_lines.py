@@ -225,6 +225,7 @@ def test_a_short_piece_on_a_longer_line_is_merged_into_it():
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_accumulator_too_big_is_a_clear_error(corridor, tmp_path, cli):
     r = cli("run", "hough-lines", corridor, "-o", tmp_path / "h.gpkg", "--set", "rho_step_m=0.001",
             "--set", "theta_step_deg=0.001", "--set", "tile_size_m=0")
@@ -236,6 +237,7 @@ def test_accumulator_too_big_is_a_clear_error(corridor, tmp_path, cli):
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_tophat_and_hough_through_the_cli(corridor, tmp_path, cli):
     r = cli("run", "tophat", corridor, "-o", tmp_path / "t.laz", "--json")
     assert r.returncode == 0, r.stderr

@@ -19,7 +19,7 @@ from toolbox_plugins.morph_dtm import core
 from toolbox_plugins.morph_dtm.evaluation import ground_errors
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # (an xdist worker tears module fixtures down when its queue runs dry)
 def terrain_scene(tmp_path_factory):
     d = tmp_path_factory.mktemp("terrain")
     toolbox.run("synthetic-scene", output=d / "t.laz", kind="terrain", seed=21)

@@ -139,7 +139,9 @@ def test_taichi_similarity_equals_the_reference_and_the_true_pose_scores_best():
 # The photo survey generator and the pylon-pose algorithm, end to end
 # ----------------------------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
+# session scope: an xdist worker tears a module fixture down whenever its queue runs dry, and
+# the survey (20 s) was made twice
+@pytest.fixture(scope="session")
 def survey(tmp_path_factory):
     from toolbox.runner import run_algorithm
 

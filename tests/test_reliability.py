@@ -133,7 +133,7 @@ def test_output_equal_to_input_is_refused_even_with_overwrite(tmp_path):
 
 # --- 3. the producer's classes --------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # (an xdist worker tears module fixtures down when its queue runs dry)
 def ahn4_crop(tmp_path_factory):
     """AHN4 07CZ2_14 around its pylon (200 m of corridor: wires 14, the tower 15, water 9), with
     all its classes as delivered."""

@@ -72,7 +72,7 @@ def test_a_pyramid_is_four_faces_not_a_horizontal_slice():
     assert scores(normal_tol_deg=None)[0]["completeness"] < 0.5  # the method's distance test alone
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # (an xdist worker tears module fixtures down when its queue runs dry)
 def roof_scene(tmp_path_factory):
     d = tmp_path_factory.mktemp("roofs")
     toolbox.run("synthetic-scene", output=d / "r.laz", kind="roofs", seed=3)

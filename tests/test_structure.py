@@ -14,14 +14,7 @@ MAX_FUNCTION_LINES = 150
 MAX_POWERLINE_PARAMETERS = 12
 MAX_PLUGIN_FILE_LINES = 1200
 # (file, function): what is over a limit today, to be split (#76)
-DEBT = {
-    ("params", "plugins/powerlines/core/wires_3d.py", "conductors_3d"),
-    ("params", "plugins/powerlines/core/wires_3d.py", "_ribbon_group"),
-    ("params", "plugins/powerlines/core/spans.py", "next_spans"),
-    ("params", "plugins/powerlines/core/supports.py", "pole_pair"),
-    ("params", "plugins/powerlines/core/supports.py", "_tower_shaped"),
-    ("params", "plugins/powerlines/stages/supports.py", "pylons_layer"),
-}
+DEBT: set = set()
 
 
 def _functions():

@@ -27,7 +27,9 @@ from conftest import TOOLBOX
 pytestmark = pytest.mark.xdist_group("survey")  # one worker: the runs below use 2 processes each
 
 
-@pytest.fixture(scope="module")
+# session scope: an xdist worker tears a module fixture down whenever its queue runs dry (the
+# scene and the powerlines runs were made twice)
+@pytest.fixture(scope="session")
 def survey(tmp_path_factory):
     """A corridor scene (about 0.6 M points), the same split into 3 x 3 files, and one dtm run
     over the whole file (the reference)."""
@@ -361,7 +363,7 @@ def test_killed_worker_is_retried_and_killed_run_resumes_with_the_same_outputs(s
         assert np.array_equal(a.read(1), b.read(1), equal_nan=True)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def powerlines_runs(survey, tmp_path_factory):
     """powerlines over the whole file, and as a survey of its 3 x 3 files in 100 m tiles."""
     d = tmp_path_factory.mktemp("powerlines")

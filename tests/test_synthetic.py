@@ -11,7 +11,7 @@ from toolbox_plugins.synthetic_scene.generator import make_scene
 from toolbox_plugins.synthetic_scene.generator.objects import catenary_z
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # (an xdist worker tears module fixtures down when its queue runs dry)
 def corridor():
     return make_scene("corridor", seed=5, density_ppm2=6.0)
 

@@ -14,6 +14,7 @@ from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_error
 import toolbox
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_every_conductor_found_no_false_one(corridor_result):
     rep, gpkg, _, truth = corridor_result
     cond = gpd.read_file(gpkg, layer="conductors")
@@ -35,6 +36,7 @@ def test_every_conductor_found_no_false_one(corridor_result):
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_pylons_on_the_synthetic_corridor(corridor, corridor_result):
     """Towers where spans end on a tall column: the lattice towers and the distribution poles of
     the scene's truth, each within 2 m, none false; their points are class 15. (Two poles of
@@ -434,6 +436,7 @@ def test_a_wire_seen_from_one_side_gets_its_own_heading(tmp_path):
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_crossings_within_5_cm_of_truth(corridor_result):
     _, gpkg, _, truth = corridor_result
     cr = gpd.read_file(gpkg, layer="crossings")
@@ -446,6 +449,7 @@ def test_crossings_within_5_cm_of_truth(corridor_result):
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_stacked_conductors_are_separated_in_3d(corridor_result):
     _, gpkg, _, truth = corridor_result
     cond = gpd.read_file(gpkg, layer="conductors")
@@ -468,6 +472,7 @@ def test_stacked_conductors_are_separated_in_3d(corridor_result):
 
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_wire_points_on_synthetic_truth(corridor_result, corridor):
     _, _, wires, _ = corridor_result
     t = laspy.read(corridor).classification == 14
@@ -605,6 +610,7 @@ def test_the_methods_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, c
     assert any("leave cell_size_m automatic" in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
 def test_the_chain_stopped_at_a_stage_and_resumed_gives_the_whole_runs_layers(corridor, corridor_result):
     """The stage API: the chain run up to the rejection stage hands on labels per candidate; the
     stages after it, resumed on that state, switch them to labels per input point (at the

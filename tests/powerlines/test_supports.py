@@ -481,10 +481,10 @@ def test_a_pole_with_a_column_beside_it_is_one_pylon():
     flat = np.where(pts[:, 0] > 1.0, 1, 0)
     centres = np.array([[0.5, 0.5], [2.5, 0.5]])
     ends = np.array([[0.0, 1.2], [0.0, -1.2], [0.1, 1.2], [0.1, -1.2]])
-    assert pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends, np.full(4, 8.5), centres, 2, 0.25, 1.5) is None
+    assert pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends, np.full(4, 8.5), centres, 2, min_share=0.25, apart_m=1.5) is None
     # the same with two of the ends at the second column: two poles
     ends2 = np.array([[0.0, 1.2], [0.0, -1.2], [2.0, 1.0], [2.0, -1.0]])
-    pair = pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends2, np.full(4, 8.5), centres, 2, 0.25, 1.5)
+    pair = pole_pair(*pts.T, flat, np.array([0, 1]), 9.0, ends2, np.full(4, 8.5), centres, 2, min_share=0.25, apart_m=1.5)
     assert pair is not None and sorted(round(p[0][0]) for p in pair) == [0, 2]
 
 

@@ -77,6 +77,7 @@ from .missed_wires import (  # noqa: F401
 )
 from .spans import (  # noqa: F401
     GrowRules,
+    NextSpanRules,
     bridge_gaps,
     grow_span_ends,
     next_spans,
@@ -90,6 +91,7 @@ from .support_ends import (  # noqa: F401
     ends_at_supports,
 )
 from .supports import (  # noqa: F401
+    PairRules,
     PassedThroughRules,
     PoleRules,
     Pylon,
@@ -107,6 +109,7 @@ from .supports import (  # noqa: F401
 from .wires_3d import (  # noqa: F401
     PeelRules,
     RibbonRules,
+    WireRules,
     _ribbon_group,
     alone_beside_wires,
     band_owner,

@@ -232,9 +232,22 @@ def _stacked_at(sp, end, sign, line_spans, own_m: float, stack_m: float, across_
     return False
 
 
-def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, reach_m: float, min_span_m: float,
-               min_points: int = 12, lateral_m: float = 0.3, max_step_m: float = 0.5, max_rise_m: float = 3.0,
-               min_contrast: float = 4.0, max_rounds: int = 4, line_of=None, wire_of=None) -> list:
+@dataclass(frozen=True)
+class NextSpanRules:
+    """The thresholds of ``next_spans`` (its docstring says what each does; the stage gives
+    ``reach_m`` from S_min)."""
+
+    reach_m: float = 60.0
+    min_points: int = 12
+    lateral_m: float = 0.3
+    max_step_m: float = 0.5
+    max_rise_m: float = 3.0
+    min_contrast: float = 4.0
+    max_rounds: int = 4
+
+
+def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_span_m: float,
+               line_of=None, wire_of=None, rules: NextSpanRules | None = None, **overrides) -> list:
     """The spans of a found wire beyond its last one: past a support the wire hangs on in a new
     catenary that ``grow_span_ends`` (the old one continued) leaves, and where the survey sees it
     sparsely among crowns (a mobile scan's wire past the last pole it passes) the shape test and
@@ -258,6 +271,9 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
     (each p*'s conductor and wire, -1: none), a wire's end is its farthest point on that catenary
     (``grow_span_ends`` carries a wire past its span's end, a sparse one with gaps between).
     Returns [(line, wire, indices into p*, s, offsets across, fit)] per span found."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or NextSpanRules(), **overrides)
+    (reach_m, min_points, lateral_m, max_step_m, max_rise_m, min_contrast, max_rounds) = dataclasses.astuple(r)
     found = []
     taken = ~np.asarray(free, bool).copy()
     tree = None
@@ -312,27 +328,38 @@ def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float,
                             hit = (k, fit, near)
                     if hit is None:
                         break
-                    k, fit, _ = hit
-                    for _refit in range(3):
-                        # the span's points along its own trend and catenary (past a support a wire
-                        # turns a little, and the end's trend continued loses it across a long span)
-                        o1, o0 = line_fit(s[k], off[k])
-                        more = np.flatnonzero((sign * (s - end) > 0) & (sign * (stop - s) > 0) & ~taken &
-                                              (np.abs(off - o0 - o1 * s) <= lateral_m) &
-                                              (np.abs(pz - catenary(s, *fit[:3])) <= fit_tolerance_m(fit[3])))
-                        run = _longest_run(s, more, max_gap_m)
-                        if len(run) <= len(k) or not np.isin(k, run).all():
-                            break
-                        refit = fit_catenary(s[run], pz[run])
-                        if refit[3] > thin_m:
-                            break
-                        k, fit = run, refit
+                    k, fit = _span_grown(hit[0], hit[1], (s, off, pz), (end, stop, sign), ~taken, lateral_m,
+                                         max_gap_m, thin_m)
                     o1, o0 = line_fit(s[k], off[k])  # the next search follows this span's own trend
                     found.append((li, wire, k, s[k], off[k], fit))
                     taken[k] = True
                     end = float(s[k].max() if sign > 0 else s[k].min())
                     z_end = float(catenary(end, *fit[:3]))
     return found
+
+
+def _span_grown(k, fit, band, reach, free, lateral_m: float, max_gap_m: float, thin_m: float):
+    """A next span's points ``k`` (fitted by ``fit``) grown along its own trend and catenary up
+    to three times (past a support a wire turns a little, and the end's trend continued loses it
+    across a long span): the points of ``band`` (along, across, height) that are ``free``, past
+    the end and short of the stop of ``reach`` (end, stop, sign), within ``lateral_m`` of the
+    span's trend and its fit's tolerance, in the longest run without a gap over ``max_gap_m``
+    holding all of ``k``, kept while the refit is at most ``thin_m`` rms. Returns (k, fit)."""
+    s, off, pz = band
+    end, stop, sign = reach
+    for _refit in range(3):
+        o1, o0 = line_fit(s[k], off[k])
+        more = np.flatnonzero((sign * (s - end) > 0) & (sign * (stop - s) > 0) & free &
+                              (np.abs(off - o0 - o1 * s) <= lateral_m) &
+                              (np.abs(pz - catenary(s, *fit[:3])) <= fit_tolerance_m(fit[3])))
+        run = _longest_run(s, more, max_gap_m)
+        if len(run) <= len(k) or not np.isin(k, run).all():
+            break
+        refit = fit_catenary(s[run], pz[run])
+        if refit[3] > thin_m:
+            break
+        k, fit = run, refit
+    return k, fit
 
 
 def _clumped(s, window_m: float, share: float = 0.5) -> bool:

@@ -145,13 +145,8 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
         if wire_near is not None and np.isfinite(wire_near[cells].max()) and \
                 height > max_height_share * float(wire_near[cells].max()):
             continue
-        passed = False
-        if span_lines is not None:
-            running = [(a, b) for a, b in span_lines if _passes(cx, cy, a, b, arm, end_radius_m)]
-            if len(span_lines) * 2 == len(span_ends):
-                ending = [span_lines[i // 2] for i in np.flatnonzero(owner == k)]
-                running = [r for r in running if any(_parallel(r, e, along_deg) for e in ending)]
-            passed = len(running) >= n_ends
+        passed = span_lines is not None and \
+            _spans_run_past(cx, cy, arm, np.flatnonzero(owner == k), span_lines, len(span_ends), r) >= n_ends
         if passed and passed_by is None:
             continue
         dist = [_point_segment_distance(cx, cy, a, b) for a, b in lines_xy]
@@ -176,19 +171,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
         # scan sees, and to an arm's cells on an angle tower; not where a stack of wires, unfound,
         # runs off its top along the line
         heading = float(line_headings[int(np.argmin(dist))])
-        base_cells = _base_cells(cells, column, n_layers, centres, np.radians(heading))
-        if area > one_tower_m2:
-            # wider than any one tower: a lattice with the crowns touching it; its base under its
-            # peak (the earth wire's), not amid the crowns' many points
-            col = cells[column[cells]]
-            peak = centres[col[np.argmax(top[col])]]
-            base_cells = base_cells[np.hypot(*(centres[base_cells] - peak).T) <= peak_reach_m]
-        mine = np.flatnonzero(np.isin(flat, base_cells))
-        bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else (cx, cy)
-        if area > one_tower_m2:
-            # its points (class 15): the cells one tower's body could cover about that base (the
-            # half-diagonal of a square of one_tower_m2), not the crowns'
-            body = body[np.hypot(centres[body][:, 0] - bx, centres[body][:, 1] - by) <= np.sqrt(one_tower_m2 / 2)]
+        (bx, by), body = _base_and_body(g, cells, body, column, (cx, cy), heading, r)
         if area <= axis_area_m2:
             # a pole (with its arms) stands on one thin column; a crown where wire pieces end
             # spreads its points over metres
@@ -197,7 +180,7 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
                 continue
         pair = None if passed or area > 2 * axis_area_m2 else \
             pole_pair(x, y, hag, flat, body, height, np.asarray(span_ends, float)[owner == k],
-                       span_end_hag[owner == k], centres, min_ends, min_axis_share, pair_apart_m)
+                       span_end_hag[owner == k], centres, min_ends, min_share=min_axis_share, apart_m=pair_apart_m)
         if pair is not None:
             # two poles side by side (a line ending at its own pole beside another line's): their
             # arms join their cells into one candidate, whose middle is neither pole
@@ -212,6 +195,41 @@ def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top
     return found
 
 
+def _spans_run_past(cx, cy, arm: float, ends_here, span_lines, n_span_ends: int, r: TowerRules) -> int:
+    """How many spans (``span_lines``: each span's plan segment) run past a candidate at (``cx``,
+    ``cy``) reaching ``arm`` out, for ``find_pylons``: where span i's ends are span ends ``2i``
+    and ``2i + 1`` (``ends_here``: the candidate's), only those along a span ending there (within
+    ``r.along_deg``) count: a pole that ends one line may stand under another crossing it."""
+    running = [(a, b) for a, b in span_lines if _passes(cx, cy, a, b, arm, r.end_radius_m)]
+    if len(span_lines) * 2 == n_span_ends:
+        ending = [span_lines[i // 2] for i in ends_here]
+        running = [q for q in running if any(_parallel(q, e, r.along_deg) for e in ending)]
+    return len(running)
+
+
+def _base_and_body(g, cells, body, column, centre, heading: float, r: TowerRules):
+    """A tower candidate's base (the median of its base cells' points, else ``centre``) and its
+    body's cells, for ``find_pylons``: a body over ``r.one_tower_m2`` is a lattice with crowns
+    touching it, its base under its peak (within ``r.peak_reach_m`` of its highest column cell)
+    and its body the cells one tower could cover about that base."""
+    x, y, _, flat, top, n_layers, centres, _, _ = g
+    base_cells = _base_cells(cells, column, n_layers, centres, np.radians(heading))
+    wide = len(body) * r.cell_m ** 2 > r.one_tower_m2
+    if wide:
+        # wider than any one tower: a lattice with the crowns touching it; its base under its
+        # peak (the earth wire's), not amid the crowns' many points
+        col = cells[column[cells]]
+        peak = centres[col[np.argmax(top[col])]]
+        base_cells = base_cells[np.hypot(*(centres[base_cells] - peak).T) <= r.peak_reach_m]
+    mine = np.flatnonzero(np.isin(flat, base_cells))
+    bx, by = (float(np.median(x[mine])), float(np.median(y[mine]))) if len(mine) else centre
+    if wide:
+        # its points (class 15): the cells one tower's body could cover about that base (the
+        # half-diagonal of a square of one_tower_m2), not the crowns'
+        body = body[np.hypot(centres[body][:, 0] - bx, centres[body][:, 1] - by) <= np.sqrt(r.one_tower_m2 / 2)]
+    return (bx, by), body
+
+
 def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRules):
     """``find_pylons``'s candidates on its grid ``g`` (``_tower_grid``'s): tall cells joined into
     bodies shaped like a tower, and the span ends each owns. Returns (shaped: [(cells, centre,
@@ -220,8 +238,7 @@ def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRul
     from scipy import ndimage
 
     x, y, hag, flat, top, n_layers, centres, (x0, y0, _, rows, cols), top_held = g
-    cell_m, end_radius_m, column_share = r.cell_m, r.end_radius_m, r.column_share
-    max_side_m, min_slenderness, max_rugged = r.max_side_m, r.min_slenderness, r.max_rugged
+    end_radius_m, column_share = r.end_radius_m, r.column_share
     has = np.isfinite(top)
     wire_top = np.zeros(rows * cols)
     ends = cKDTree(np.asarray(span_ends, float))
@@ -241,10 +258,8 @@ def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRul
     shaped = []  # (cells, centre, arm reach, height) of the candidates shaped like a tower
     for k in range(1, n + 1):
         cells = _shaped_bodies(np.flatnonzero(lab == k), column, (rows, cols), centres,
-                               lambda c: _tower_shaped(c, x, y, hag, flat, top, top_held, column, centres, cell_m,
-                                                       max_side_m, min_slenderness, max_rugged) is not None)
-        got = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
-                            min_slenderness, max_rugged)
+                               lambda c: _tower_shaped(c, g, column, r) is not None)
+        got = _tower_shaped(cells, g, column, r)
         if got is not None:  # (centre, how far out the wires may hang, height)
             shaped.append((cells, *got))
     if not shaped:
@@ -261,9 +276,23 @@ def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRul
     return shaped, owner, column, structure
 
 
+@dataclass(frozen=True)
+class PairRules:
+    """The thresholds of ``pole_pair`` (its docstring says what each does; ``find_pylons`` gives
+    ``min_share`` and ``apart_m`` from its own ``min_axis_share`` and ``pair_apart_m``)."""
+
+    min_share: float = 0.25
+    apart_m: float = 1.5
+    axis_m: float = 0.5
+    low_m: float = 3.0
+    head_m: float = 1.5
+    second_share: float = 0.5
+    min_points: int = 5
+    min_rise_share: float = 0.5
+
+
 def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
-               min_share: float, apart_m: float, axis_m: float = 0.5, low_m: float = 3.0, head_m: float = 1.5,
-               second_share: float = 0.5, min_points: int = 5, min_rise_share: float = 0.5):
+              rules: PairRules | None = None, **overrides):
     """Two poles in one candidate, or None: the body's points from ``low_m`` above ground to
     ``head_m`` under its top gathered on thin verticals (the most within ``axis_m``), the densest
     holding ``min_share`` of them (a pole's column, not a lattice's legs) and another at least
@@ -271,6 +300,9 @@ def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, 
     (a column, not a crown's piece); each holds at least ``min_ends`` of the candidate's span ends
     (``ends_xy``, their heights ``ends_hag``), the nearer axis's. Returns per pole ((x, y),
     height, its span ends, its body cells: the nearer pole's)."""
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or PairRules(), **overrides)
+    (min_share, apart_m, axis_m, low_m, head_m, second_share, min_points, min_rise_share) = dataclasses.astuple(r)
     inside = np.flatnonzero(np.isin(flat, body))
     mine = inside[(hag[inside] >= low_m) & (hag[inside] <= height - head_m)]
     if len(mine) < 2 * min_points or len(ends_xy) < 2 * min_ends:
@@ -428,11 +460,13 @@ def _shaped_bodies(cells, column, shape, centres, shaped) -> np.ndarray:
     return np.sort(np.concatenate(ok)) if ok and len(ok) < len(parts) else cells
 
 
-def _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m, min_slenderness,
-                  max_rugged):
+def _tower_shaped(cells, g, column, r):
     """(centre of the body, arm reach, height: ``top_held``'s highest) of the tall cells
-    ``cells`` where they are shaped like a tower (see find_pylons: a column, at most
-    ``max_side_m`` across, slender, not a crown's rugged points), else None."""
+    ``cells`` of the grid ``g`` (``_tower_grid``'s) where they are shaped like a tower (see
+    find_pylons: a column, at most ``r.max_side_m`` across, slender, not a crown's rugged points),
+    else None. ``r``: the caller's rules (TowerRules or PassedThroughRules)."""
+    x, y, hag, flat, top, _, centres, _, top_held = g
+    cell_m, max_side_m, min_slenderness, max_rugged = r.cell_m, r.max_side_m, r.min_slenderness, r.max_rugged
     if not column[cells].any():
         return None
     pc = centres[cells]
@@ -537,8 +571,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
         cells = order[bounds[i]:bounds[i + 1]]
         if not through[cells].any():
             continue
-        shaped = _tower_shaped(cells, x, y, hag, flat, top, top_held, column, centres, cell_m, max_side_m,
-                               min_slenderness, max_rugged)
+        shaped = _tower_shaped(cells, g, column, r)
         if shaped is None:
             continue
         centre, arm, height = shaped

@@ -29,9 +29,21 @@ from .catenaries import (
 from .clutter import _on_spans
 
 
-def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float,
-                  min_points: int = 20, max_rms: float = np.inf, off_link: float = 0.25, reach: float | None = None,
-                  ground_z=None, peel: bool = True, min_piece: float | None = None, only=None):
+@dataclass(frozen=True)
+class WireRules:
+    """The thresholds of ``conductors_3d`` (its docstring says what each does; the stage gives
+    ``max_rms`` from its parameters)."""
+
+    min_points: int = 20
+    max_rms: float = np.inf
+    off_link: float = 0.25
+    reach: float | None = None
+    peel: bool = True
+    min_piece: float | None = None
+
+
+def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float, ground_z=None,
+                  only=None, rules: WireRules | None = None, **overrides):
     """Wires and their catenary spans along each 2D line (of those in ``only``, if given: a line's
     result depends on the points ``band_owner`` gives it and nothing else).
 
@@ -49,14 +61,16 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
     cuts or occlusions is fitted when at least ``min_piece`` long (default ``min_span / 2``): a
     span's end at a tower, a wire seen in stretches from a street.
     """
-    if reach is None:
-        reach = band
-    if min_piece is None:
-        min_piece = min_span / 2
+    # a value given by name overrides the rule's
+    r = dataclasses.replace(rules or WireRules(), **overrides)
+    (min_points, max_rms, off_link, reach, peel, min_piece) = dataclasses.astuple(r)
+    r = dataclasses.replace(r, reach=band if reach is None else reach,
+                            min_piece=min_span / 2 if min_piece is None else min_piece)
     spans: list[Span] = []
     line_of = np.full(len(px), -1, np.int64)
     wire_of_point = np.full(len(px), -1, np.int64)
-    owner = band_owner(lines, px, py, band, reach)
+    out = (spans, line_of, wire_of_point)
+    owner = band_owner(lines, px, py, band, r.reach)
     for li, (anchor, direction, _, _) in enumerate(lines):
         if only is not None and li not in only:
             continue
@@ -84,91 +98,109 @@ def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, 
         next_wire = int(wire_of.max()) + 1 if len(wire_of) else 0
         for k in np.flatnonzero(wire_of >= 0):
             m = lab == k
-            if s[m].max() - s[m].min() < min_piece:
+            if s[m].max() - s[m].min() < r.min_piece:
                 continue
-            wire = int(wire_of[k])
-            sk, zk, ik, ok_ = s[m], z[m], cand[m], off[m]
-            n_spans = [0]
-
-            def emit(sel, wire, fit):
-                spans.append(make_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit, z=zk[sel]))
-                n_spans[0] += 1
-                z0, s0, c, rms = fit
-                if rms <= max_rms:  # points of a span that is not a wire are not wire points
-                    resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
-                    on = ik[sel][resid <= fit_tolerance_m(rms)]
-                    line_of[on], wire_of_point[on] = li, wire
-
-            pieces = [(sk.min(), sk.max() + 1e-9)]
-            cuts = split_spans(sk, zk, min_span)
-            if cuts:
-                pieces = list(zip([sk.min()] + cuts, cuts + [sk.max() + 1e-9]))
-            while pieces:
-                lo_s, hi_s = pieces.pop(0)
-                sel = (sk >= lo_s) & (sk < hi_s)
-                if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_piece:
-                    continue
-                fit = fit_catenary(sk[sel], zk[sel])
-                if fit[3] > max_rms and peel:
-                    # one catenary does not fit: wires stacked closer than z_link (a mobile scan's
-                    # distribution line) or clutter linked to a wire: its catenaries one at a time
-                    found = peel_catenaries(sk[sel], zk[sel], ok_[sel], min_points, min_span, max_rms, gap_m=s_link)
-                    if found:
-                        where = np.flatnonzero(sel)
-                        for i, (part, part_fit) in enumerate(found):
-                            emit(where[part], wire if i == 0 else next_wire, part_fit)
-                            next_wire += i > 0
-                        continue
-                if fit[3] > max_rms:
-                    # one catenary does not fit: look again for an attachment point, more sensitively
-                    finer = split_spans(sk[sel], zk[sel], min_span, min_drop=0.005)
-                    if not finer:  # no slope evidence (points missing at the pole): the widest gap
-                        ss_ = np.sort(sk[sel])
-                        gaps = np.diff(ss_)
-                        ok = (ss_[:-1] - ss_[0] >= min_span) & (ss_[-1] - ss_[1:] >= min_span) & (gaps >= 1.0)
-                        if ok.any():
-                            g = int(np.argmax(np.where(ok, gaps, -1)))
-                            finer = [float(ss_[g] + gaps[g] / 2)]
-                    if finer:
-                        edges = [lo_s] + finer + [hi_s]
-                        pieces = list(zip(edges[:-1], edges[1:])) + pieces
-                        continue
-                if hi_s - lo_s >= 2 * min_span:
-                    cut = kink_cut(sk[sel], zk[sel], min_span)
-                    if cut is not None:  # two spans, one attachment between them
-                        pieces = [(lo_s, cut), (cut, hi_s)] + pieces
-                        continue
-                emit(np.flatnonzero(sel), wire, fit)
+            next_wire = _fit_pieces((s[m], z[m], cand[m], off[m]), li, int(wire_of[k]), next_wire, out, min_span,
+                                    s_link, r)
         good = [sp for sp in spans if sp.conductor == li and sp.rms <= max_rms]
-        # a line that holds a wire: what its pieces left (the sparse stretches of a mobile scan, a
-        # wire linked to clutter under it) searched for catenaries as a whole, across gaps twice the
-        # link's (occlusions); then across WIDE_GAP_LINKS for a thin wire (an earth wire over the
-        # phases) that the survey hit in stretches several V_max apart, kept where nothing else of
-        # the band lies around its points (a facade's scan rows, a crown's edge have their
-        # neighbours there)
-        for gap_m, wide in ((2 * s_link, False), (WIDE_GAP_LINKS * s_link, True)):
-            free = np.flatnonzero(line_of[cand] < 0)
-            if not (good and peel and len(free) >= min_points):
-                continue
-            xyz = np.column_stack([s, off, z]) if wide else None
-            for part, fit in peel_catenaries(s[free], z[free], off[free], min_points, min_span, max_rms,
-                                             gap_m=gap_m):
-                sel = free[part]
-                if wide:
-                    # (one without a gap over the first search's is what that search turned down)
-                    if np.diff(np.sort(s[sel])).max() <= 2 * s_link or not stands_clear(xyz, sel, ISOLATION_M):
-                        continue
-                    sel, fit, gone = _whole_sparse_wire(sel, fit, xyz, line_of[cand] >= 0, wire_of_point[cand],
-                                                        max_rms, ISOLATION_M)
-                    if gone:  # stretches of it dense enough to have been fitted alone
-                        spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
-                        good = [sp for sp in good if sp.wire not in gone]
-                spans.append(make_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
-                line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
-                next_wire += 1
-                good.append(spans[-1])
+        _sparse_wires(li, (cand, s, off, z), good, next_wire, out, min_span, s_link, r)
         _pick_up(li, good, cand, s, z, off, line_of, wire_of_point)
     return spans, line_of, wire_of_point
+
+
+def _fit_pieces(piece, li, wire, next_wire: int, out, min_span: float, s_link: float, r: WireRules) -> int:
+    """One wire's ``piece`` (along, height, point indices, across) of line ``li`` fitted span by
+    span for ``conductors_3d``: cut at attachment points, a piece no catenary fits peeled or cut
+    again; the spans and the points on them go to ``out`` (spans, line_of, wire_of_point).
+    Returns the next free wire number."""
+    spans, line_of, wire_of_point = out
+    min_points, max_rms, min_piece = r.min_points, r.max_rms, r.min_piece
+    sk, zk, ik, ok_ = piece
+    n_spans = [0]
+
+    def emit(sel, wire, fit):
+        spans.append(make_span(li, wire, n_spans[0], sk[sel], ok_[sel], fit, z=zk[sel]))
+        n_spans[0] += 1
+        z0, s0, c, rms = fit
+        if rms <= max_rms:  # points of a span that is not a wire are not wire points
+            resid = np.abs(catenary(sk[sel], z0, s0, c) - zk[sel])
+            on = ik[sel][resid <= fit_tolerance_m(rms)]
+            line_of[on], wire_of_point[on] = li, wire
+
+    pieces = [(sk.min(), sk.max() + 1e-9)]
+    cuts = split_spans(sk, zk, min_span)
+    if cuts:
+        pieces = list(zip([sk.min()] + cuts, cuts + [sk.max() + 1e-9]))
+    while pieces:
+        lo_s, hi_s = pieces.pop(0)
+        sel = (sk >= lo_s) & (sk < hi_s)
+        if sel.sum() < min_points or sk[sel].max() - sk[sel].min() < min_piece:
+            continue
+        fit = fit_catenary(sk[sel], zk[sel])
+        if fit[3] > max_rms and r.peel:
+            # one catenary does not fit: wires stacked closer than z_link (a mobile scan's
+            # distribution line) or clutter linked to a wire: its catenaries one at a time
+            found = peel_catenaries(sk[sel], zk[sel], ok_[sel], min_points, min_span, max_rms, gap_m=s_link)
+            if found:
+                where = np.flatnonzero(sel)
+                for i, (part, part_fit) in enumerate(found):
+                    emit(where[part], wire if i == 0 else next_wire, part_fit)
+                    next_wire += i > 0
+                continue
+        if fit[3] > max_rms:
+            # one catenary does not fit: look again for an attachment point, more sensitively
+            finer = split_spans(sk[sel], zk[sel], min_span, min_drop=0.005)
+            if not finer:  # no slope evidence (points missing at the pole): the widest gap
+                ss_ = np.sort(sk[sel])
+                gaps = np.diff(ss_)
+                ok = (ss_[:-1] - ss_[0] >= min_span) & (ss_[-1] - ss_[1:] >= min_span) & (gaps >= 1.0)
+                if ok.any():
+                    g = int(np.argmax(np.where(ok, gaps, -1)))
+                    finer = [float(ss_[g] + gaps[g] / 2)]
+            if finer:
+                edges = [lo_s] + finer + [hi_s]
+                pieces = list(zip(edges[:-1], edges[1:])) + pieces
+                continue
+        if hi_s - lo_s >= 2 * min_span:
+            cut = kink_cut(sk[sel], zk[sel], min_span)
+            if cut is not None:  # two spans, one attachment between them
+                pieces = [(lo_s, cut), (cut, hi_s)] + pieces
+                continue
+        emit(np.flatnonzero(sel), wire, fit)
+    return next_wire
+
+
+def _sparse_wires(li, band, good: list, next_wire: int, out, min_span: float, s_link: float, r: WireRules) -> None:
+    """What the pieces of a line that holds a wire (``good``: its fitted spans, extended here)
+    left, searched for catenaries as a whole for ``conductors_3d`` (``band``: the line's candidate
+    indices, along, across, height; ``out`` as ``_fit_pieces``'): the sparse stretches of a mobile
+    scan, a wire linked to clutter under it, across gaps twice the link's (occlusions); then
+    across WIDE_GAP_LINKS for a thin wire (an earth wire over the phases) that the survey hit in
+    stretches several V_max apart, kept where nothing else of the band lies around its points (a
+    facade's scan rows, a crown's edge have their neighbours there)."""
+    spans, line_of, wire_of_point = out
+    cand, s, off, z = band
+    for gap_m, wide in ((2 * s_link, False), (WIDE_GAP_LINKS * s_link, True)):
+        free = np.flatnonzero(line_of[cand] < 0)
+        if not (good and r.peel and len(free) >= r.min_points):
+            continue
+        xyz = np.column_stack([s, off, z]) if wide else None
+        for part, fit in peel_catenaries(s[free], z[free], off[free], r.min_points, min_span, r.max_rms,
+                                         gap_m=gap_m):
+            sel = free[part]
+            if wide:
+                # (one without a gap over the first search's is what that search turned down)
+                if np.diff(np.sort(s[sel])).max() <= 2 * s_link or not stands_clear(xyz, sel, ISOLATION_M):
+                    continue
+                sel, fit, gone = _whole_sparse_wire(sel, fit, xyz, line_of[cand] >= 0, wire_of_point[cand],
+                                                    r.max_rms, ISOLATION_M)
+                if gone:  # stretches of it dense enough to have been fitted alone
+                    spans[:] = [sp for sp in spans if not (sp.conductor == li and sp.wire in gone)]
+                    good[:] = [sp for sp in good if sp.wire not in gone]
+            spans.append(make_span(li, next_wire, 0, s[sel], off[sel], fit, z=z[sel]))
+            line_of[cand[sel]], wire_of_point[cand[sel]] = li, next_wire
+            next_wire += 1
+            good.append(spans[-1])
 
 
 def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: float, max_slope: float = 0.5,
@@ -318,9 +350,7 @@ def ribbon_lines(lines, px, py, band_m, min_length_m, max_gap_m, rules: RibbonRu
     out, source, held, changed = [], [], [], False
     pts = np.column_stack([px, py])
     for members in groups.values():
-        redrawn = _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg,
-                                step_deg, bin_m, peak_m, min_points, match_m, min_wires, min_share) \
-            if long_[members[0]] else None
+        redrawn = _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, r) if long_[members[0]] else None
         if redrawn is None:
             out += [lines[k] for k in members]
             source += members
@@ -333,10 +363,10 @@ def ribbon_lines(lines, px, py, band_m, min_length_m, max_gap_m, rules: RibbonRu
     return (out, source, held) if changed else None
 
 
-def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_m, search_deg, step_deg, bin_m,
-                  peak_m, min_points, match_m, min_wires, min_share):
+def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, r: RibbonRules):
     """One group of ``ribbon_lines``: [(line, source index, points held or None)] redrawn, or
     None (left as it is)."""
+    min_gap_m, min_points, min_wires, min_share = r.min_gap_m, r.min_points, r.min_wires, r.min_share
     main = max(members, key=lambda k: lines[k][3] - lines[k][2])
     a, d, _, _ = lines[main]
     longest = lines[main][3] - lines[main][2]
@@ -351,33 +381,8 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
         return None
     rel = pts[inside] - a
     s, o = rel @ d, rel @ nrm
-    sc = s - np.median(s)  # turn about the middle: the offsets stay where they are there
-    best, best_phi = -1.0, 0.0
-    for phi in np.radians(np.arange(-search_deg, search_deg + step_deg / 2, step_deg)):
-        turned = o - phi * sc
-        h = np.bincount(((turned - turned.min()) / bin_m).astype(np.int64))
-        score = float(h @ h)
-        if score > best:
-            best, best_phi = score, phi
-    oc = o - best_phi * sc
-    lo, hi = float(oc.min()) - 2 * bin_m, float(oc.max()) + 2 * bin_m
-    nb = int(np.ceil((hi - lo) / bin_m)) + 1
-    h = np.bincount(((oc - lo) / bin_m).astype(np.int64).clip(0, nb - 1), minlength=nb).astype(float)
-    hs = np.convolve(h, [1.0, 2.0, 1.0], mode="same")
-    peaks = [i for i in range(1, nb - 1) if hs[i] > 0 and hs[i] >= hs[i - 1] and hs[i] > hs[i + 1]]
-    wires = []  # (centre, points) of the peaks holding a wire
-    for i in peaks:
-        c = lo + (i + 0.5) * bin_m
-        near = np.abs(oc - c) <= peak_m
-        if near.sum() < min_points:
-            continue
-        c = float(np.median(oc[near]))
-        near = np.abs(oc - c) <= peak_m
-        runs = _runs(s[near], max_gap_m, min_length_m)
-        # a wire of the ribbon runs along most of it (not a stub of an arm or a jumper)
-        if sum(r[1] - r[0] for r in runs) < 0.5 * longest:
-            continue
-        wires.append((c, int(near.sum())))
+    oc = _turned_offsets(s, o, r)
+    wires = _ribbon_peaks(s, oc, longest, max_gap_m, min_length_m, r)
     if not wires:
         return None
     wires.sort()
@@ -391,11 +396,12 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
     if len(merged) < min_wires:
         return None
     centres = [sum(c * m for c, m in g) / sum(m for _, m in g) for g in merged]
-    on_wires = np.abs(oc[:, None] - np.array([c for g in merged for c, _ in g])[None, :]).min(axis=1) <= peak_m
+    on_wires = np.abs(oc[:, None] - np.array([c for g in merged for c, _ in g])[None, :]).min(axis=1) <= r.peak_m
     if on_wires.mean() < min_share:
         return None
     # each wire's own line: its points (within peak_m, or within half the gap to its neighbours
     # for a merged bundle) refitted along the turned frame
+    peak_m = r.peak_m
     redrawn = []
     for g, c in zip(merged, centres):
         half = max(peak_m, 0.5 * (g[-1][0] - g[0][0]) + peak_m)
@@ -403,7 +409,7 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
         runs = _runs(s[mine], max_gap_m, min_length_m)
         if not runs:
             continue
-        t0, t1 = min(r[0] for r in runs), max(r[1] for r in runs)
+        t0, t1 = min(q[0] for q in runs), max(q[1] for q in runs)
         on = mine & (s >= t0) & (s <= t1)
         slope, icpt = line_fit(s[on], o[on])
         d2 = (d + slope * nrm) / np.hypot(1.0, slope)
@@ -420,7 +426,8 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
     matched = set()
     for k in members:
         ss, oo = ends_of(k)
-        hit = [w for w, (_, (sl, ic, _, _), _) in enumerate(redrawn) if np.all(np.abs(oo - (sl * ss + ic)) <= match_m)]
+        hit = [w for w, (_, (sl, ic, _, _), _) in enumerate(redrawn)
+               if np.all(np.abs(oo - (sl * ss + ic)) <= r.match_m)]
         if len(hit) != 1 or hit[0] in matched:
             break
         matched.add(hit[0])
@@ -444,6 +451,46 @@ def _ribbon_group(lines, members, pts, band_m, min_length_m, max_gap_m, min_gap_
         if np.any(oo < across.min(axis=0) - 0.5 * min_gap_m) or np.any(oo > across.max(axis=0) + 0.5 * min_gap_m):
             out.append((lines[k], k, None))
     return out
+
+
+def _turned_offsets(s, o, r: RibbonRules):
+    """The offsets ``o`` across a ribbon group's frame turned about the middle of ``s`` by the
+    angle (within ``r.search_deg``, ``r.step_deg`` steps) that stacks them most sharply (the sum
+    of squared counts of ``r.bin_m`` bins): wires side by side are parallel and straight in plan."""
+    sc = s - np.median(s)  # turn about the middle: the offsets stay where they are there
+    best, best_phi = -1.0, 0.0
+    for phi in np.radians(np.arange(-r.search_deg, r.search_deg + r.step_deg / 2, r.step_deg)):
+        turned = o - phi * sc
+        h = np.bincount(((turned - turned.min()) / r.bin_m).astype(np.int64))
+        score = float(h @ h)
+        if score > best:
+            best, best_phi = score, phi
+    return o - best_phi * sc
+
+
+def _ribbon_peaks(s, oc, longest: float, max_gap_m: float, min_length_m: float, r: RibbonRules) -> list:
+    """(centre, points) of the peaks of the turned offsets ``oc`` that hold a wire: ``r.min_points``
+    within ``r.peak_m``, running along half the ``longest`` line or more in runs of
+    ``min_length_m`` (gaps under ``max_gap_m``): not a stub of an arm or a jumper."""
+    bin_m, peak_m = r.bin_m, r.peak_m
+    lo, hi = float(oc.min()) - 2 * bin_m, float(oc.max()) + 2 * bin_m
+    nb = int(np.ceil((hi - lo) / bin_m)) + 1
+    h = np.bincount(((oc - lo) / bin_m).astype(np.int64).clip(0, nb - 1), minlength=nb).astype(float)
+    hs = np.convolve(h, [1.0, 2.0, 1.0], mode="same")
+    peaks = [i for i in range(1, nb - 1) if hs[i] > 0 and hs[i] >= hs[i - 1] and hs[i] > hs[i + 1]]
+    wires = []
+    for i in peaks:
+        c = lo + (i + 0.5) * bin_m
+        near = np.abs(oc - c) <= peak_m
+        if near.sum() < r.min_points:
+            continue
+        c = float(np.median(oc[near]))
+        near = np.abs(oc - c) <= peak_m
+        runs = _runs(s[near], max_gap_m, min_length_m)
+        if sum(q[1] - q[0] for q in runs) < 0.5 * longest:
+            continue
+        wires.append((c, int(near.sum())))
+    return wires
 
 
 def _runs(t, max_gap_m: float, min_length_m: float) -> list:

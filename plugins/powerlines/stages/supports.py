@@ -20,16 +20,15 @@ from ..wire_sets import keep_conductors
 
 
 def stage(scene, st: State, settings, ctx) -> State:
-    pc, hu, vu, params, hag, low = scene.pc, scene.hu, scene.vu, settings.params, scene.hag, scene.low
-    ground_cls, dtm, timings, grown = scene.ground_cls, scene.dtm, st.timings, st.grown
+    pc, hu, vu, params, low = scene.pc, scene.hu, scene.vu, settings.params, scene.low
+    timings, grown = st.timings, st.grown
     lines, geo, spans = st.wires.as_tuple()
     keep, line_of, wire_of_pt = st.labels.as_tuple()
     t = time.perf_counter()
     conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
     conductor_of[keep] = line_of
     passed_by = []
-    pylons, tower_pt, found = pylons_layer(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu, vu,
-                                           dtm, params, passed_by=passed_by)
+    pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, passed_by=passed_by)
     with_arms, own_arms = [], []
     wire_ends = fitted_wire_ends(geo, spans, params["max_rms_3d_m"])
     arms = arm_lines(lines["conductors"], found, hu, with_arms=with_arms, wire_ends=wire_ends)
@@ -42,9 +41,8 @@ def stage(scene, st: State, settings, ctx) -> State:
         conductor_of[keep] = line_of
         # a tower whose arms were taken for conductors stays one, though without their span ends
         # too few may end at it (a suspension tower the wires run through)
-        pylons, tower_pt, found = pylons_layer(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"], hu,
-                                               vu, dtm, params, also=[found[i] for i in sorted(set(with_arms))] +
-                                               [passed_by[i] for i in sorted(set(own_arms))])
+        also = [found[i] for i in sorted(set(with_arms))] + [passed_by[i] for i in sorted(set(own_arms))]
+        pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=also)
     if params["grow_spans"] and found:
         # with the supports found, a stack's wires grow up to the pole or tower they face: in a
         # sparse stack the other wires' few points made the columns too noisy to tell the support
@@ -62,8 +60,7 @@ def stage(scene, st: State, settings, ctx) -> State:
         timings["grow_spans_s"] = timings.get("grow_spans_s", 0.0) + grow_time
         t += grow_time
         if on.any():  # a tower's footprint may have grown along the wires' points now taken
-            pylons, tower_pt, found = pylons_layer(pc, hag, ground_cls, conductor_of, spans, geo, lines["conductors"],
-                                                   hu, vu, dtm, params, also=found)
+            pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=found)
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
         # on AHN4: the wire between the arms is class 15); one grown up to a pole stays wire
@@ -80,9 +77,13 @@ def stage(scene, st: State, settings, ctx) -> State:
     return st
 
 
-def pylons_layer(pc, hag, ground_cls, conductor_of, spans, geo, cond, hu, vu, dtm, params, also=(), passed_by=None):
-    """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points; towers of
+def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=None):
+    """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points, given each
+    point's conductor so far (``conductor_of``, -1: none) and the ``wires`` found; towers of
     ``also`` (found before) are kept where none is found within 2 m of them now."""
+    pc, hag, ground_cls, hu, vu, dtm = scene.pc, scene.hag, scene.ground_cls, scene.hu, scene.vu, scene.dtm
+    _, geo, spans = wires.as_tuple()
+    cond = wires.lines["conductors"]
     off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
     ends, end_z, span_lines = [], [], []
     for sp in spans:
