@@ -52,11 +52,16 @@ def run_stages(scene, st, settings, ctx, first: str | None = None, last: str | N
             raise ValueError(f"no stage {name!r}; the stages after ground: {', '.join(names)}")
     lo = names.index(first) if first else 0
     hi = names.index(last) if last else len(names) - 1
-    for name, stage in CHAIN[lo:hi + 1]:
-        t = time.perf_counter()
-        st = stage(scene, st, settings, ctx)
-        st.timings[f"stage_{name}_s"] = time.perf_counter() - t
-        ctx.log.debug("powerlines: %s: stage %s took %.2f s", scene.pc.source, name, st.timings[f"stage_{name}_s"])
+    # a bar over the stages, naming the one running (several take seconds on a dense tile)
+    with ctx.progress(total=hi - lo + 1, desc="powerlines", unit="stage") as bar:
+        for name, stage in CHAIN[lo:hi + 1]:
+            bar.set_postfix_str(name, refresh=True)
+            t = time.perf_counter()
+            st = stage(scene, st, settings, ctx)
+            st.timings[f"stage_{name}_s"] = time.perf_counter() - t
+            ctx.log.debug("powerlines: %s: stage %s took %.2f s", scene.pc.source, name,
+                          st.timings[f"stage_{name}_s"])
+            bar.update(1)
     return st
 
 
