@@ -308,19 +308,25 @@ def _vegetation_returns(pts, trees, u, v, zg, taken, pulse_id, rng, noise_m: flo
     tree_index = cKDTree(np.column_stack([trees.u, trees.v]))
     free = np.flatnonzero(~taken)
     k = min(4, len(trees))
-    dist, idx = tree_index.query(np.column_stack([u[free], v[free]]), k=k, distance_upper_bound=float(trees.radius.max()))
-    dist = dist.reshape(len(free), k)
-    idx = idx.reshape(len(free), k)
+    reach = float(trees.radius.max())
+    # only the pulses with a crown centre in their cell or the next (cells as wide as the largest
+    # crown's radius) can fall in a crown: the others are not searched (the same neighbours result)
+    near = free[_near_centres(u[free], v[free], trees.u, trees.v, reach)]
+    dist = np.full((len(free), k), np.inf)
+    idx = np.full((len(free), k), len(trees))
+    at = np.searchsorted(free, near)
+    d_near, i_near = tree_index.query(np.column_stack([u[near], v[near]]), k=k, distance_upper_bound=reach)
+    dist[at], idx[at] = d_near.reshape(len(near), k), i_near.reshape(len(near), k)
     best_top = np.full(len(free), -np.inf)
     best_k = np.full(len(free), -1)
     for j in range(k):
         ok = idx[:, j] < len(trees)
         kk = np.where(ok, idx[:, j], 0)
-        inside = ok & (dist[:, j] < trees.radius[kk])
-        ztop, _ = trees.surfaces(kk, dist[:, j])
-        better = inside & (ztop > best_top)
-        best_top = np.where(better, ztop, best_top)
-        best_k = np.where(better, kk, best_k)
+        inside = np.flatnonzero(ok & (dist[:, j] < trees.radius[kk]))
+        ztop, _ = trees.surfaces(kk[inside], dist[inside, j])
+        better = ztop > best_top[inside]
+        best_top[inside[better]] = ztop[better]
+        best_k[inside[better]] = kk[inside[better]]
     hit = best_k >= 0
     pi = free[hit]
     tk = best_k[hit]
@@ -347,6 +353,22 @@ def _vegetation_returns(pts, trees, u, v, zg, taken, pulse_id, rng, noise_m: flo
     pts.add(u[pi[g]], v[pi[g]], zg[pi[g]] + rng.normal(0, noise_m, g.sum()), GROUND, n_ret[g], n_ret[g],
             pulse_id[pi[g]], intensity=rng.integers(100, 400, g.sum()))
     taken[pi] = True
+
+
+def _near_centres(u, v, cu, cv, reach_m: float) -> np.ndarray:
+    """Mask of the points (``u``, ``v``) that may have a centre (``cu``, ``cv``) within
+    ``reach_m``: on a grid of cells ``reach_m`` wide, those with a centre in their cell or one of
+    the eight around it (a centre nearer than ``reach_m`` is never further away)."""
+    x0, y0 = min(float(u.min(initial=0.0)), float(cu.min())), min(float(v.min(initial=0.0)), float(cv.min()))
+    cell = max(reach_m, 1e-6)
+    ci, cj = ((cu - x0) // cell).astype(np.int64) + 1, ((cv - y0) // cell).astype(np.int64) + 1
+    pi, pj = ((u - x0) // cell).astype(np.int64) + 1, ((v - y0) // cell).astype(np.int64) + 1
+    shape = (int(max(ci.max(), pi.max(initial=0))) + 2, int(max(cj.max(), pj.max(initial=0))) + 2)
+    marked = np.zeros(shape, bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            marked[ci + di, cj + dj] = True
+    return marked[pi, pj]
 
 
 def _track_frame(line, offset_m):
