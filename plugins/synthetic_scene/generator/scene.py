@@ -311,10 +311,10 @@ def _vegetation_returns(pts, trees, u, v, zg, taken, pulse_id, rng, noise_m: flo
     reach = float(trees.radius.max())
     # only the pulses with a crown centre in their cell or the next (cells as wide as the largest
     # crown's radius) can fall in a crown: the others are not searched (the same neighbours result)
-    near = free[_near_centres(u[free], v[free], trees.u, trees.v, reach)]
+    at = np.flatnonzero(_near_centres(u[free], v[free], trees.u, trees.v, reach))
+    near = free[at]
     dist = np.full((len(free), k), np.inf)
     idx = np.full((len(free), k), len(trees))
-    at = np.searchsorted(free, near)
     d_near, i_near = tree_index.query(np.column_stack([u[near], v[near]]), k=k, distance_upper_bound=reach)
     dist[at], idx[at] = d_near.reshape(len(near), k), i_near.reshape(len(near), k)
     best_top = np.full(len(free), -np.inf)
@@ -359,12 +359,14 @@ def _near_centres(u, v, cu, cv, reach_m: float) -> np.ndarray:
     """Mask of the points (``u``, ``v``) that may have a centre (``cu``, ``cv``) within
     ``reach_m``: on a grid of cells ``reach_m`` wide, those with a centre in their cell or one of
     the eight around it (a centre nearer than ``reach_m`` is never further away)."""
-    x0, y0 = min(float(u.min(initial=0.0)), float(cu.min())), min(float(v.min(initial=0.0)), float(cv.min()))
+    if not len(u):
+        return np.zeros(0, bool)
+    x0, y0 = min(u.min(), cu.min()), min(v.min(), cv.min())
     cell = max(reach_m, 1e-6)
+    # indices from 1, so that the cells around every centre's lie on the grid
     ci, cj = ((cu - x0) // cell).astype(np.int64) + 1, ((cv - y0) // cell).astype(np.int64) + 1
     pi, pj = ((u - x0) // cell).astype(np.int64) + 1, ((v - y0) // cell).astype(np.int64) + 1
-    shape = (int(max(ci.max(), pi.max(initial=0))) + 2, int(max(cj.max(), pj.max(initial=0))) + 2)
-    marked = np.zeros(shape, bool)
+    marked = np.zeros((max(ci.max(), pi.max()) + 2, max(cj.max(), pj.max()) + 2), bool)
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             marked[ci + di, cj + dj] = True
