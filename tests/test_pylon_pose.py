@@ -188,12 +188,19 @@ def test_pylon_pose_finds_both_types_from_a_metashape_xml(survey, hypotheses):
 
     from toolbox.runner import run_algorithm
 
+    truth = json.loads((survey / "points_truth.json").read_text())["pylons"]
     out = survey / f"found_{hypotheses}.gpkg"
-    rep = run_algorithm("pylon-pose", {"photos": str(survey / "photos"), "cameras": str(survey / "cameras.xml"),
-                                       "dem": str(survey / "points_dem.tif")}, out, {"hypotheses": hypotheses})
+    inputs = {"photos": str(survey / "photos"), "cameras": str(survey / "cameras.xml"), "dem": str(survey / "points_dem.tif")}
+    if hypotheses == "triangles":  # from rough positions 2.5 m off (a user's or powerlines' pylons): no detection
+        from shapely.geometry import Point
+
+        rough = gpd.GeoDataFrame(geometry=[Point(p["x"] + 1.5, p["y"] - 2.0) for p in truth], crs="EPSG:25832")
+        rough.to_file(survey / "rough.gpkg", layer="pylons")
+        inputs["rough"] = str(survey / "rough.gpkg")
+    rep = run_algorithm("pylon-pose", inputs, out, {"hypotheses": hypotheses})
+    assert rep["stats"].get("rough_from") == ("input" if hypotheses == "triangles" else None)
     # the triangles' P3P hypotheses start the search (the grid only where fewer than two photos give one)
     assert rep["stats"]["started_from"][hypotheses] >= 1
-    truth = json.loads((survey / "points_truth.json").read_text())["pylons"]
     got = gpd.read_file(out, layer="pylons")
     assert len(got) == len(truth) == rep["stats"]["n_pylons"]  # every pylon, no false one
     assert len(gpd.read_file(out, layer="pylon_footprints")) == len(truth)
