@@ -54,6 +54,8 @@ from .catenaries import (  # noqa: F401
     split_spans,
 )
 from .clutter import (  # noqa: F401
+    FLANK_MIN_ROWS,
+    FLANK_ROW_GAP_M,
     AlongSurfaceRules,
     FoliageRules,
     SurfaceRules,
@@ -61,6 +63,7 @@ from .clutter import (  # noqa: F401
     core_and_ring,
     core_and_ring_masks,
     core_ring_contrast,
+    flank_rows,
     in_a_surface,
     in_foliage,
     off_their_spans,

@@ -294,3 +294,61 @@ def _on_spans(s, off, z, spans, lateral_m: float, margin_m: float):
         ok = (r <= fit_tolerance_m(sp.rms)) & (r < best_r[near])
         best_r[near[ok]], best_k[near[ok]] = r[ok], k
     return best_r, best_k
+
+
+# a flank's rows come a scan-angle step apart (0.3 m on the Oakland scans looked at), and foliage
+# leaves some out: rows up to 1.5 m apart are one flank's
+FLANK_ROW_GAP_M = 1.5
+# its rows start and end at the crown's edge, ragged by a metre or two
+FLANK_EDGE_M = 2.0
+# more levels than a street pole or a tower carries on one span, sub-conductors included (the
+# deepest stacks on the bench's scenes and AHN4: 3 within 1.5 m of one another, 6 in all)
+FLANK_MIN_ROWS = 7
+
+
+def flank_rows(spans, max_gap_m: float = FLANK_ROW_GAP_M, edge_m: float = FLANK_EDGE_M,
+               min_rows: int = FLANK_MIN_ROWS) -> list:
+    """The spans that are rows of a surface seen side-on, not wires (#77). A profile scanner
+    passing a crown's or a hedge's flank leaves a row of points at each step of its scan angle,
+    one above the other up the flank, and the 3D step fits each row as a wire level of one plan
+    line; the rows start and end together, at the flank's edges. Wires on one span keep
+    clearances and a support carries a few levels. Levels of one conductor are linked where both
+    their ends lie within ``edge_m`` along the line and their heights (at the middle of their
+    common stretch) within ``max_gap_m``; groups of at least ``min_rows`` are a flank's. Returns
+    the indices into ``spans`` of those levels' spans."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    levels: dict = {}
+    for k, sp in enumerate(spans):
+        levels.setdefault((sp.conductor, sp.wire), []).append(k)
+    by_line: dict = {}
+    for key, ks in levels.items():
+        by_line.setdefault(key[0], []).append(ks)
+    gone = []
+    for groups in by_line.values():
+        if len(groups) < min_rows:
+            continue
+        lo = np.array([min(spans[k].s_from for k in ks) for ks in groups])
+        hi = np.array([max(spans[k].s_to for k in ks) for ks in groups])
+        i, j = np.triu_indices(len(groups), 1)
+        together = (np.abs(lo[i] - lo[j]) <= edge_m) & (np.abs(hi[i] - hi[j]) <= edge_m)
+        i, j = i[together], j[together]
+        mid = 0.5 * (np.maximum(lo[i], lo[j]) + np.minimum(hi[i], hi[j]))
+        linked = np.abs(_level_height(spans, groups, i, mid) - _level_height(spans, groups, j, mid)) <= max_gap_m
+        g = coo_matrix((np.ones(int(linked.sum())), (i[linked], j[linked])), shape=(len(groups),) * 2)
+        _, comp = connected_components(g, directed=False)
+        for c in np.flatnonzero(np.bincount(comp) >= min_rows):
+            gone += [k for m in np.flatnonzero(comp == c) for k in groups[m]]
+    return sorted(gone)
+
+
+def _level_height(spans, groups, which, s) -> np.ndarray:
+    """Height of level ``groups[which[n]]`` at ``s[n]`` along its line: its span there (or the
+    nearest one's end)."""
+    out = np.empty(len(which))
+    for n, (m, sn) in enumerate(zip(which, s)):
+        sps = [spans[k] for k in groups[m]]
+        sp = min(sps, key=lambda q: max(q.s_from - sn, sn - q.s_to, 0.0))
+        out[n] = catenary(np.clip(sn, sp.s_from, sp.s_to), sp.z0, sp.s0, sp.c)
+    return out

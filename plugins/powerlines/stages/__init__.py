@@ -14,18 +14,19 @@ per input point; ``settings`` (``settings.Settings``) the run's parameters and d
 7. ``pole_wires``: short wires leading from a found pole
 8. ``cleaning``: (labels per input point from here) foliage and off-trend points, lines in surfaces, stacks
 9. ``plan_split``: side-by-side wires split in plan, lone points beside wires, pole columns, realignment
-10. ``layers``: the GeoPackage layers, the classified cloud, the stats
+10. ``flank_rows``: wire levels stacked deeper than a span carries, ending together: a crown's flank
+11. ``layers``: the GeoPackage layers, the classified cloud, the stats
 """
 
 from __future__ import annotations
 
 import time
 
-from . import cleaning, ground, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection, supports
+from . import cleaning, flank_rows, ground, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection, supports
 
 CHAIN = (("plan_lines", plan_lines.stage), ("more_wires", more_wires.stage), ("rejection", rejection.stage),
          ("next_spans", next_spans.stage), ("supports", supports.stage), ("pole_wires", pole_wires.stage),
-         ("cleaning", cleaning.stage), ("plan_split", plan_split.stage))
+         ("cleaning", cleaning.stage), ("plan_split", plan_split.stage), ("flank_rows", flank_rows.stage))
 
 
 def run_chain(pc, settings, ctx, until: str | None = None):

@@ -1,4 +1,4 @@
-"""Stage 10, layers: the conductors' attributes (heights above ground, wires), the 3D layer (a
+"""Stage 11, layers: the conductors' attributes (heights above ground, wires), the 3D layer (a
 catenary per span that fits), the crossings, the pylons, the classified cloud, and the stats."""
 
 from __future__ import annotations
