@@ -62,8 +62,6 @@ def _run(inputs, params, ctx):
 
     import geopandas as gpd
     import numpy as np
-    import shapely
-    from shapely.geometry import LineString, MultiPoint, Polygon
 
     from . import core, reference
 
@@ -91,15 +89,7 @@ def _run(inputs, params, ctx):
 
     budget = (params["max_accumulator_mb"] * 2**20 if params["max_accumulator_mb"] is not None
               else RAM_SHARE * total_ram_bytes())
-    for b, g in groups:
-        p = xyz[g] - xyz[g].mean(axis=0)
-        radius = float(np.sqrt((p * p).sum(axis=1).max()))
-        need = core.accumulator_bytes(angle, radius, rho)
-        if need > budget:
-            raise UsageError(
-                f"roof-planes: the ball accumulator of building {b} in {pc.source!r} ({radius * hu:.0f} m across "
-                f"from its centre) would take {need / 2**20:.0f} MiB, over the budget of {budget / 2**20:.0f} MiB; "
-                f"raise angle_step_deg or rho_step_m (or max_accumulator_mb)")
+    _check_accumulators(pc, xyz, groups, angle, rho, budget)
     spacing = core.mean_spacing_xy(xyz[:, :2]) if len(xyz) >= 2 else float("nan")
     link = params["link_m"] / hu if params["link_m"] is not None else max(1.0 / hu, 4 * spacing)
     voter = reference.vote
@@ -118,39 +108,11 @@ def _run(inputs, params, ctx):
         planes, reg = core.regularise_planes(xyz[g], planes, params["regularise_sigma"])
         for k, v in reg.items():
             reg_counts[k] = reg_counts.get(k, 0) + v
-        first_id = next_id
-        hulls = []
-        for pl in planes:
-            pts = xyz[g[pl.indices]]
-            hull = shapely.concave_hull(MultiPoint(pts[:, :2]), ratio=params["hull_ratio"])
-            if not isinstance(hull, Polygon) or hull.is_empty:
-                hull = MultiPoint(pts[:, :2]).convex_hull
-                if not isinstance(hull, Polygon):
-                    hull = hull.buffer(0.5 * spacing)
-            hulls.append(hull)
-        pairs = core.adjacent_pairs(xyz[g], planes, link)
-        meets = core.roof_lines(xyz[g], planes, link, pairs=pairs)
-        steps = core.step_edges(xyz[g], planes, hulls, link, 2 * params["max_distance_m"] / hu, pairs=pairs,
-                                skip_pairs={(ln.plane_a, ln.plane_b) for ln in meets})
-        for ln in meets + steps:
-            line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
-            line_rows.append({"kind": ln.kind, "building_id": int(b), "plane_a": first_id + ln.plane_a,
-                              "plane_b": first_id + ln.plane_b,
-                              "length_m": round(float(np.linalg.norm(ln.end - ln.start)) * hu, 3)})
-        for pl, hull in zip(planes, hulls):
-            members = g[pl.indices]
-            plane_id[idx[members]] = next_id
-            pts = xyz[members]
-            n = pl.normal
-            ring = np.asarray(hull.exterior.coords)
-            zr = (pl.d - ring[:, 0] * n[0] - ring[:, 1] * n[1]) / n[2] if n[2] > 0.05 else np.full(len(ring), pts[:, 2].mean())
-            geoms.append(Polygon(np.column_stack([ring, zr * hu / vu])))
-            slope, aspect = core.plane_attributes(n)
-            rows.append({"plane_id": next_id, "building_id": int(b), "normal_x": float(n[0]), "normal_y": float(n[1]),
-                         "normal_z": float(n[2]), "d": float(pl.d * hu), "slope_deg": round(slope, 3),
-                         "aspect_deg": round(aspect, 3), "n_points": int(len(members)),
-                         "rms_m": round(pl.rms * hu, 4), "area_m2": round(hull.area * hu * hu / max(n[2], 1e-6), 2)})
-            next_id += 1
+        n = _building_layers(xyz[g], planes, int(b), next_id, params, (spacing, link, hu, vu),
+                             (rows, geoms, line_rows, line_geoms))
+        for k, pl in enumerate(planes):
+            plane_id[idx[g[pl.indices]]] = next_id + k
+        next_id += n
     if rows:
         gdf = gpd.GeoDataFrame(rows, geometry=geoms, crs=pc.crs)
     else:
@@ -170,6 +132,68 @@ def _run(inputs, params, ctx):
     stats["n_roof_lines"] = {k: sum(r["kind"] == k for r in line_rows) for k in ("ridge", "hip", "valley", "break", "step")}
     return toolbox.Result({"planes": {"roof_planes": gdf, "roof_lines": lines}, "classified": pc.with_fields(plane_id=plane_id)},
                           stats=stats)
+
+
+def _check_accumulators(pc, xyz, groups, angle, rho, budget) -> None:
+    """Refuse a building whose ball accumulator would pass ``budget`` bytes, before any is made."""
+    import numpy as np
+
+    from . import core
+
+    hu = pc.horizontal_unit_m
+    for b, g in groups:
+        p = xyz[g] - xyz[g].mean(axis=0)
+        radius = float(np.sqrt((p * p).sum(axis=1).max()))
+        need = core.accumulator_bytes(angle, radius, rho)
+        if need > budget:
+            raise UsageError(
+                f"roof-planes: the ball accumulator of building {b} in {pc.source!r} ({radius * hu:.0f} m across "
+                f"from its centre) would take {need / 2**20:.0f} MiB, over the budget of {budget / 2**20:.0f} MiB; "
+                f"raise angle_step_deg or rho_step_m (or max_accumulator_mb)")
+
+
+def _building_layers(pts_b, planes, b: int, first_id: int, params, scale, out) -> int:
+    """One building's planes (outlines: concave hulls lifted onto each plane) and roof lines
+    (ridges, hips, valleys, breaks, steps) appended to ``out`` (plane rows, plane geometries, line
+    rows, line geometries), the planes numbered from ``first_id``. Returns the number of planes."""
+    import numpy as np
+    import shapely
+    from shapely.geometry import LineString, MultiPoint, Polygon
+
+    from . import core
+
+    spacing, link, hu, vu = scale
+    rows, geoms, line_rows, line_geoms = out
+    hulls = []
+    for pl in planes:
+        pts = pts_b[pl.indices]
+        hull = shapely.concave_hull(MultiPoint(pts[:, :2]), ratio=params["hull_ratio"])
+        if not isinstance(hull, Polygon) or hull.is_empty:
+            hull = MultiPoint(pts[:, :2]).convex_hull
+            if not isinstance(hull, Polygon):
+                hull = hull.buffer(0.5 * spacing)
+        hulls.append(hull)
+    pairs = core.adjacent_pairs(pts_b, planes, link)
+    meets = core.roof_lines(pts_b, planes, link, pairs=pairs)
+    steps = core.step_edges(pts_b, planes, hulls, link, 2 * params["max_distance_m"] / hu, pairs=pairs,
+                            skip_pairs={(ln.plane_a, ln.plane_b) for ln in meets})
+    for ln in meets + steps:
+        line_geoms.append(LineString([(*ln.start[:2], ln.start[2] * hu / vu), (*ln.end[:2], ln.end[2] * hu / vu)]))
+        line_rows.append({"kind": ln.kind, "building_id": b, "plane_a": first_id + ln.plane_a,
+                          "plane_b": first_id + ln.plane_b,
+                          "length_m": round(float(np.linalg.norm(ln.end - ln.start)) * hu, 3)})
+    for k, (pl, hull) in enumerate(zip(planes, hulls)):
+        pts = pts_b[pl.indices]
+        n = pl.normal
+        ring = np.asarray(hull.exterior.coords)
+        zr = (pl.d - ring[:, 0] * n[0] - ring[:, 1] * n[1]) / n[2] if n[2] > 0.05 else np.full(len(ring), pts[:, 2].mean())
+        geoms.append(Polygon(np.column_stack([ring, zr * hu / vu])))
+        slope, aspect = core.plane_attributes(n)
+        rows.append({"plane_id": first_id + k, "building_id": b, "normal_x": float(n[0]), "normal_y": float(n[1]),
+                     "normal_z": float(n[2]), "d": float(pl.d * hu), "slope_deg": round(slope, 3),
+                     "aspect_deg": round(aspect, 3), "n_points": int(len(pl.indices)),
+                     "rms_m": round(pl.rms * hu, 4), "area_m2": round(hull.area * hu * hu / max(n[2], 1e-6), 2)})
+    return len(planes)
 
 
 MASK_BYTES_PER_CELL = 16  # the building mask, its labels and the morphology's temporaries
@@ -194,40 +218,15 @@ def _run_edges(inputs, params, ctx):
     import numpy as np
     from affine import Affine
     from scipy import ndimage
-    from shapely.geometry import LineString
-
-    from toolbox.io.rasters import Raster
 
     from . import edges
 
     pc = inputs["points"]
     pc.require_points("building-edges", 3)
-    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    hu = pc.horizontal_unit_m
     t0 = time.perf_counter()
     cell = params["cell_size_m"] / hu
-    cls = pc.classification
-    source = params["source"]
-    height = None
-    if source != "all":
-        # heights above the terrain: the file's ground when it has one, else the ground filter's
-        has_ground = cls is not None and np.any(cls == 2)
-        dtm = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0).outputs["dtm"]
-        height = (pc.z - dtm.sample(pc.x, pc.y)) * vu / hu
-    if source == "auto":
-        source = "classified" if cls is not None and np.any(cls == 6) else "height"
-    if source == "all":
-        roof = np.ones(len(pc), bool)
-    elif source == "classified":
-        if cls is None or not np.any(cls == 6):
-            raise DataError(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
-        roof = cls == 6
-    elif source == "detect":
-        roof = np.asarray(ctx.call("classify", {"points": pc}).outputs["classified"].classification) == 6
-    else:  # the method: last returns above a height threshold
-        last = np.ones(len(pc), bool)
-        if "return_number" in pc.fields and "number_of_returns" in pc.fields:
-            last = np.asarray(pc.fields["return_number"]) == np.asarray(pc.fields["number_of_returns"])
-        roof = last & (height >= params["min_height_m"] / hu)
+    roof, height, source = _edge_roof_points(pc, params, ctx)
     idx = np.flatnonzero(roof)
     if len(idx) < 3:
         raise DataError(f"input {pc.source!r}: no building points found (source={source}); check min_height_m or "
@@ -262,20 +261,7 @@ def _run_edges(inputs, params, ctx):
         rs, cs = boxes[b - 1]
         r0, r1, c0, c1 = max(rs.start - 2, 0), rs.stop + 2, max(cs.start - 2, 0), cs.stop + 2
         edge = edges.edge_pixels(lab[r0:r1, c0:c1] == b)
-        lines, my_edges = [], []
-        if edge.sum() >= 4:
-            img = Raster(edge.astype(np.uint8), transform @ Affine.translation(c0, r0), crs=pc.crs)
-            try:
-                res = ctx.call("hough-lines-raster", {"image": img}, theta_step_deg=0.5, rho_step_m=params["cell_size_m"],
-                               band_m=params["cell_size_m"], min_votes=max(4, int(round(2.0 / params["cell_size_m"]))),
-                               s_min_m=2.0, v_max_m=2 * params["cell_size_m"], tile_size_m=0.0)
-                found = res.outputs["lines"]["conductors"]
-            except DataError:
-                found = []
-            for row in (found.itertuples() if len(found) else []):
-                xy = np.asarray(row.geometry.coords)
-                lines.append((float(np.arctan2(xy[-1, 1] - xy[0, 1], xy[-1, 0] - xy[0, 0])), float(row.votes)))
-                my_edges.append((LineString(xy), int(row.votes), round(float(row.geometry.length) * hu, 3)))
+        lines, my_edges = _outline_edges(ctx, pc, edge, transform @ Affine.translation(c0, r0), params["cell_size_m"])
         direction = edges.refine_direction(x[members], y[members], edges.dominant_direction(lines))
         poly = edges.regular_outline(x[members], y[members], direction, cell, min_area=min_area)
         if poly is None:
@@ -304,6 +290,63 @@ def _run_edges(inputs, params, ctx):
     layers["building_outlines"].attrs["geometry_type"] = "Polygon"
     return toolbox.Result({"outlines": layers}, stats={"source": source, "n_buildings": bid, "n_edges": len(e_rows),
                                                      "seconds": round(time.perf_counter() - t0, 3)})
+
+
+def _edge_roof_points(pc, params, ctx):
+    """(mask of the building points, their heights above the terrain or None, the source used)
+    for building-edges."""
+    import numpy as np
+
+    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
+    cls = pc.classification
+    source = params["source"]
+    height = None
+    if source != "all":
+        # heights above the terrain: the file's ground when it has one, else the ground filter's
+        has_ground = cls is not None and np.any(cls == 2)
+        dtm = ctx.call("dtm", {"points": pc}, ground="file" if has_ground else "filter", resolution_m=1.0).outputs["dtm"]
+        height = (pc.z - dtm.sample(pc.x, pc.y)) * vu / hu
+    if source == "auto":
+        source = "classified" if cls is not None and np.any(cls == 6) else "height"
+    if source == "all":
+        return np.ones(len(pc), bool), height, source
+    if source == "classified":
+        if cls is None or not np.any(cls == 6):
+            raise DataError(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
+        return cls == 6, height, source
+    if source == "detect":
+        return np.asarray(ctx.call("classify", {"points": pc}).outputs["classified"].classification) == 6, height, source
+    # the method: last returns above a height threshold
+    last = np.ones(len(pc), bool)
+    if "return_number" in pc.fields and "number_of_returns" in pc.fields:
+        last = np.asarray(pc.fields["return_number"]) == np.asarray(pc.fields["number_of_returns"])
+    return last & (height >= params["min_height_m"] / hu), height, source
+
+
+def _outline_edges(ctx, pc, edge, transform, cell_size_m: float):
+    """The straight edges of one building's outline pixels (``edge``, placed by ``transform``)
+    through hough-lines-raster: ([(direction rad, votes)], [(LineString, votes, length m)])."""
+    import numpy as np
+    from shapely.geometry import LineString
+
+    from toolbox.io.rasters import Raster
+
+    lines, my_edges = [], []
+    if edge.sum() < 4:
+        return lines, my_edges
+    img = Raster(edge.astype(np.uint8), transform, crs=pc.crs)
+    try:
+        res = ctx.call("hough-lines-raster", {"image": img}, theta_step_deg=0.5, rho_step_m=cell_size_m,
+                       band_m=cell_size_m, min_votes=max(4, int(round(2.0 / cell_size_m))),
+                       s_min_m=2.0, v_max_m=2 * cell_size_m, tile_size_m=0.0)
+        found = res.outputs["lines"]["conductors"]
+    except DataError:
+        found = []
+    for row in (found.itertuples() if len(found) else []):
+        xy = np.asarray(row.geometry.coords)
+        lines.append((float(np.arctan2(xy[-1, 1] - xy[0, 1], xy[-1, 0] - xy[0, 0])), float(row.votes)))
+        my_edges.append((LineString(xy), int(row.votes), round(float(row.geometry.length) * pc.horizontal_unit_m, 3)))
+    return lines, my_edges
 
 
 @toolbox.hookimpl
