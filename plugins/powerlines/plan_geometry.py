@@ -227,14 +227,8 @@ def side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min
         mine, groups, to_centre = found
         a, d, t0, t1 = geo[li]
         n = np.array([-d[1], d[0]])
-        trends = []
-        for g in groups:  # the group's offset along the line: its spans' trends, sampled at both ends
-            ss = np.concatenate([[mine[k].s_from, mine[k].s_to] for k in g])
-            oo = np.concatenate([[mine[k].offset + mine[k].offset_slope * mine[k].s_from + to_centre[k],
-                                  mine[k].offset + mine[k].offset_slope * mine[k].s_to + to_centre[k]] for k in g])
-            trends.append(line_fit(ss, oo) if np.ptp(ss) > 0 else (0.0, float(np.median(oo))))
         moved[li] = []
-        for gi, (g, (o1, o0)) in enumerate(zip(groups, trends)):
+        for gi, (g, (o1, o0)) in enumerate(zip(groups, _group_trends(mine, groups, to_centre))):
             d2 = d + o1 * n
             d2 = d2 / np.hypot(*d2)
             a2 = a + o0 * n
@@ -248,13 +242,7 @@ def side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min
                 k_new = li
             else:
                 k_new = len(new_geo)
-                row = cond.iloc[li].copy()
-                row["conductor"] = k_new
-                new_rows.append(row)
-                for _, sr in seg[seg["conductor"] == li].iterrows():
-                    sr = sr.copy()
-                    sr["conductor"] = k_new
-                    new_segs.append(sr)
+                _copy_rows(cond, seg, li, k_new, new_rows, new_segs)
                 new_geo.append(None)
             new_geo[k_new] = (a2, d2, t0, t1)
             moved[li].append((k_new, o1, o0, [mine[k] for k in g]))
@@ -307,6 +295,28 @@ def side_by_side(lines, geo, spans, conductor_of, wire_of, x, y, params, hu, min
         g.attrs.update(src.attrs)
     return ({**lines, "conductors": cond, "conductor_segments": seg}, new_geo, spans, conductor_of, wire_of,
             len(new_geo) - len(geo))
+
+
+def _group_trends(mine, groups, to_centre) -> list:
+    """Each group's offset along the line, (slope, intercept): its spans' trends sampled at both ends."""
+    trends = []
+    for g in groups:
+        ss = np.concatenate([[mine[k].s_from, mine[k].s_to] for k in g])
+        oo = np.concatenate([[mine[k].offset + mine[k].offset_slope * mine[k].s_from + to_centre[k],
+                              mine[k].offset + mine[k].offset_slope * mine[k].s_to + to_centre[k]] for k in g])
+        trends.append(line_fit(ss, oo) if np.ptp(ss) > 0 else (0.0, float(np.median(oo))))
+    return trends
+
+
+def _copy_rows(cond, seg, li: int, k_new: int, new_rows: list, new_segs: list) -> None:
+    """Conductor ``li``'s row and its segments' rows, copied as conductor ``k_new``'s."""
+    row = cond.iloc[li].copy()
+    row["conductor"] = k_new
+    new_rows.append(row)
+    for _, sr in seg[seg["conductor"] == li].iterrows():
+        sr = sr.copy()
+        sr["conductor"] = k_new
+        new_segs.append(sr)
 
 
 def _groups_across(fitting, li, trend_agree, min_gap_m: float, s_min_m: float):

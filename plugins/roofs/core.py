@@ -181,28 +181,7 @@ def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_d
     def is_face(idx):
         return len(idx) >= min_points and _width(p[idx]) >= min_width and _width(p[idx], min_width) >= min_width / 2
 
-    kept = [t for t in planes if is_face(t[2])]
-    # a plane most of whose points lie as near another plane, beside that plane's points, is a
-    # strip across their intersection (beside: a coplanar face elsewhere on the roof, cut off by
-    # another wing, is no reason)
-    kept.sort(key=lambda t: len(t[2]))
-    plan = {}  # one k-d tree per plane's points in plan, built when first needed
-    j = 0
-    while j < len(kept):
-        n, d, idx = kept[j]
-        others = [o for i, o in enumerate(kept) if i != j]
-        near = np.zeros(len(idx), bool)
-        for n2, d2, idx2 in others:
-            close = np.abs(p[idx] @ n2 - d2) <= max_distance
-            if close.any():
-                if id(idx2) not in plan:
-                    plan[id(idx2)] = cKDTree(p[idx2, :2])
-                close[close] = plan[id(idx2)].query(p[idx[close], :2], distance_upper_bound=link)[0] <= link
-            near |= close
-        if others and near.mean() > 0.5:
-            del kept[j]
-        else:
-            j += 1
+    kept = _without_strips(p, [t for t in planes if is_face(t[2])], max_distance, link)
     if len(kept) < len(planes):
         planes = _assign(p, kept, max_distance, link)
     planes = _merge(p, planes, max_distance, link)
@@ -223,6 +202,31 @@ def detect_planes(xyz: np.ndarray, angle_step_deg: float, rho_step: float, max_d
             rms = float(np.sqrt(np.mean((p[idx] @ n - d) ** 2)))
         out.append(Plane(n, d + float(n @ centre), idx, rms))
     return out
+
+
+def _without_strips(p, kept, max_distance, link):
+    """The planes (n, d, indices) less those most of whose points lie as near another plane,
+    beside that plane's points: a strip across their intersection (beside: a coplanar face
+    elsewhere on the roof, cut off by another wing, is no reason). Smallest first."""
+    kept = sorted(kept, key=lambda t: len(t[2]))
+    plan = {}  # one k-d tree per plane's points in plan, built when first needed
+    j = 0
+    while j < len(kept):
+        n, d, idx = kept[j]
+        others = [o for i, o in enumerate(kept) if i != j]
+        near = np.zeros(len(idx), bool)
+        for n2, d2, idx2 in others:
+            close = np.abs(p[idx] @ n2 - d2) <= max_distance
+            if close.any():
+                if id(idx2) not in plan:
+                    plan[id(idx2)] = cKDTree(p[idx2, :2])
+                close[close] = plan[id(idx2)].query(p[idx[close], :2], distance_upper_bound=link)[0] <= link
+            near |= close
+        if others and near.mean() > 0.5:
+            del kept[j]
+        else:
+            j += 1
+    return kept
 
 
 def _assign(p, found, max_distance, link):
