@@ -115,17 +115,8 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         raise ValueError(f"line_variant must be one of {LINE_VARIANTS}")
     if scanner not in SCANNERS or (scanner == "mobile" and kind != "corridor"):
         raise ValueError(f"scanner must be one of {SCANNERS} (mobile: corridor scenes only)")
-    if kind != "corridor":
-        lines = []
-    elif line_variant == "ribbon":
-        lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
-    elif line_variant == "distribution":
-        lines = _distribution_lines(W, H, rng, terrain, comm_cables, comm_spacing_m)
-    else:
-        lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m, span_m=span_m,
-                             stacked=line_variant == "stacked")
-    for line in lines:
-        line["towers"] = _supports_at_brows(line, terrain, others=[o for o in lines if o is not line])
+    lines = _scene_lines(kind, line_variant, W, H, rng, terrain, (phase_spacing_m, comm_cables, comm_spacing_m,
+                                                                  bundle, bundle_spacing_m, span_m))
     buildings = _place_buildings(kind, W, H, rng, terrain, lines, roof_set)
     trees = _place_trees(kind, W, H, rng, terrain, buildings, lines)
     n_eave_trees = 0
@@ -144,19 +135,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     # buildings (single returns on the roof)
     _roof_returns(pts, buildings, trees, n_eave_trees, u, v, taken, pulse_id, rng, noise_m)
 
-    # bridge deck
-    if terrain.embankment is not None and terrain.embankment.bridge_at is not None:
-        deck = terrain.embankment.deck_mask(u, v) & ~taken & (terrain.embankment.raise_m(u, v) < terrain.embankment.height_m - 0.05)
-        pts.add(u[deck], v[deck], terrain.deck_height(u[deck], v[deck]) + rng.normal(0, noise_m, deck.sum()),
-                BRIDGE, 1, 1, pulse_id[deck], obj=9000, intensity=700)
-        taken |= deck
-
-    # water: specular, only a few pulses come back
-    water = terrain.water_mask(u, v) & ~taken
-    back = water & (rng.uniform(0, 1, n_pulses) < 0.04)
-    pts.add(u[back], v[back], terrain.pond_level_m + rng.normal(0, noise_m, back.sum()) if back.any() else [],
-            WATER, 1, 1, pulse_id[back], obj=9100, intensity=rng.integers(20, 80, back.sum()))
-    taken |= water
+    _deck_and_water_returns(pts, terrain, u, v, taken, pulse_id, rng, noise_m)
 
     # vegetation: multiple returns
     if len(trees):
@@ -174,13 +153,7 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         _add_line(line, terrain, rng, pts, truth, spacing, noise_m, wire_id, origin)
         wire_id += 100
 
-    # ---- outliers below ground (multipath) and a few birds ------------------------------
-    n_low = max(3, int(n_pulses * 5e-5))
-    lu, lv = rng.uniform(0, W, n_low), rng.uniform(0, H, n_low)
-    pts.add(lu, lv, terrain.height(lu, lv) - rng.uniform(1.0, 15.0, n_low), NOISE, 1, 1, _gps_time(lu, lv, H), intensity=30)
-    n_high = max(2, n_low // 4)
-    hu, hv = rng.uniform(0, W, n_high), rng.uniform(0, H, n_high)
-    pts.add(hu, hv, terrain.height(hu, hv) + rng.uniform(45.0, 90.0, n_high), NOISE, 1, 1, _gps_time(hu, hv, H), intensity=30)
+    _outlier_returns(pts, terrain, W, H, n_pulses, rng)
 
     allp = pts.concat()
     if scanner == "mobile":
@@ -192,7 +165,68 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
     order = np.lexsort((allp["ret"], allp["pulse"]))  # acquisition order: by pulse, then return
     allp = {k: val[order] for k, val in allp.items()}
     ox, oy = origin
-    fields = {
+    fields = _las_fields(allp)
+
+    # ---- truth ---------------------------------------------------------------------------
+    dtm = _truth_dtm(terrain, W, H, dtm_resolution_m)
+    _object_truth(truth, buildings, trees, terrain, allp, origin)
+    _crossings(truth)
+    if scanner == "mobile":
+        _mobile_truth(truth, allp, origin, _track(lines[0], track_offset_m, origin), full_density_range_m)
+    u_all, v_all = allp["u"], allp["v"]
+    cls_all = allp["cls"]
+    vals, counts = np.unique(cls_all, return_counts=True)
+    truth["class_counts"] = {int(a): int(b) for a, b in zip(vals, counts)}
+    truth["n_points"] = int(len(u_all))
+    truth["n_pulses"] = int(n_pulses)
+    return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
+                 dtm_resolution_m, truth, terrain)
+
+
+def _scene_lines(kind, line_variant, W, H, rng, terrain, shape) -> list:
+    """The scene's power lines (none but on a corridor) with their supports placed."""
+    phase_spacing_m, comm_cables, comm_spacing_m, bundle, bundle_spacing_m, span_m = shape
+    if kind != "corridor":
+        lines = []
+    elif line_variant == "ribbon":
+        lines = _ribbon_lines(W, H, rng, terrain, phase_spacing_m)
+    elif line_variant == "distribution":
+        lines = _distribution_lines(W, H, rng, terrain, comm_cables, comm_spacing_m)
+    else:
+        lines = _power_lines(kind, W, H, rng, terrain, bundle, bundle_spacing_m, span_m=span_m,
+                             stacked=line_variant == "stacked")
+    for line in lines:
+        line["towers"] = _supports_at_brows(line, terrain, others=[o for o in lines if o is not line])
+    return lines
+
+
+def _deck_and_water_returns(pts, terrain, u, v, taken, pulse_id, rng, noise_m) -> None:
+    """The bridge deck's returns, and the few a specular pond sends back; ``taken`` marks both."""
+    if terrain.embankment is not None and terrain.embankment.bridge_at is not None:
+        deck = terrain.embankment.deck_mask(u, v) & ~taken & (terrain.embankment.raise_m(u, v) < terrain.embankment.height_m - 0.05)
+        pts.add(u[deck], v[deck], terrain.deck_height(u[deck], v[deck]) + rng.normal(0, noise_m, deck.sum()),
+                BRIDGE, 1, 1, pulse_id[deck], obj=9000, intensity=700)
+        taken |= deck
+    water = terrain.water_mask(u, v) & ~taken
+    back = water & (rng.uniform(0, 1, len(u)) < 0.04)
+    pts.add(u[back], v[back], terrain.pond_level_m + rng.normal(0, noise_m, back.sum()) if back.any() else [],
+            WATER, 1, 1, pulse_id[back], obj=9100, intensity=rng.integers(20, 80, back.sum()))
+    taken |= water
+
+
+def _outlier_returns(pts, terrain, W, H, n_pulses, rng) -> None:
+    """Outliers below the ground (multipath) and a few birds high over it."""
+    n_low = max(3, int(n_pulses * 5e-5))
+    lu, lv = rng.uniform(0, W, n_low), rng.uniform(0, H, n_low)
+    pts.add(lu, lv, terrain.height(lu, lv) - rng.uniform(1.0, 15.0, n_low), NOISE, 1, 1, _gps_time(lu, lv, H), intensity=30)
+    n_high = max(2, n_low // 4)
+    hu, hv = rng.uniform(0, W, n_high), rng.uniform(0, H, n_high)
+    pts.add(hu, hv, terrain.height(hu, hv) + rng.uniform(45.0, 90.0, n_high), NOISE, 1, 1, _gps_time(hu, hv, H), intensity=30)
+
+
+def _las_fields(allp) -> dict:
+    """The point fields written to the LAS file."""
+    return {
         "classification": allp["cls"],
         "return_number": allp["ret"],
         "number_of_returns": allp["nret"],
@@ -203,31 +237,25 @@ def make_scene(kind: str = "corridor", seed: int = 1, density_ppm2: float = 12.0
         "plane_id": allp["plane"],
     }
 
-    # ---- truth ---------------------------------------------------------------------------
-    cols = int(np.ceil(W / dtm_resolution_m))
-    rows = int(np.ceil(H / dtm_resolution_m))
-    cu = (np.arange(cols) + 0.5) * dtm_resolution_m
-    cv = H - (np.arange(rows) + 0.5) * dtm_resolution_m
-    UU, VV = np.meshgrid(cu, cv)
-    dtm = terrain.height(UU, VV).astype(np.float32)
 
-    _object_truth(truth, buildings, trees, terrain, allp, origin)
-    _crossings(truth)
-    if scanner == "mobile":  # what the thinning left of each span
-        for sp in truth["spans"]:
-            a, b = np.asarray(sp["a"][:2]) - origin, np.asarray(sp["b"][:2]) - origin
-            t = ((allp["u"] - a[0]) * (b - a)[0] + (allp["v"] - a[1]) * (b - a)[1]) / max(sp["length_m"], 1e-9) ** 2
-            sp["n_points"] = int(np.sum((allp["obj"] == sp["wire_id"]) & (t >= 0) & (t < 1)))
-        truth["scanner"] = {"kind": "mobile", "track": _track(lines[0], track_offset_m, origin),
-                            "height_over_ground_m": MOBILE_TRACK_HEIGHT_M, "full_density_range_m": full_density_range_m}
-    u_all, v_all = allp["u"], allp["v"]
-    cls_all = allp["cls"]
-    vals, counts = np.unique(cls_all, return_counts=True)
-    truth["class_counts"] = {int(a): int(b) for a, b in zip(vals, counts)}
-    truth["n_points"] = int(len(u_all))
-    truth["n_pulses"] = int(n_pulses)
-    return Scene(kind, seed, (ox, oy), (W, H), crs, u_all + ox, v_all + oy, allp["z"], fields, dtm,
-                 dtm_resolution_m, truth, terrain)
+def _truth_dtm(terrain, W, H, resolution_m) -> np.ndarray:
+    """The terrain's heights at the cell centres of the truth DTM (north up)."""
+    cols = int(np.ceil(W / resolution_m))
+    rows = int(np.ceil(H / resolution_m))
+    cu = (np.arange(cols) + 0.5) * resolution_m
+    cv = H - (np.arange(rows) + 0.5) * resolution_m
+    UU, VV = np.meshgrid(cu, cv)
+    return terrain.height(UU, VV).astype(np.float32)
+
+
+def _mobile_truth(truth, allp, origin, track, full_density_range_m) -> None:
+    """What the mobile scanner's thinning left of each span, and the scanner's track."""
+    for sp in truth["spans"]:
+        a, b = np.asarray(sp["a"][:2]) - origin, np.asarray(sp["b"][:2]) - origin
+        t = ((allp["u"] - a[0]) * (b - a)[0] + (allp["v"] - a[1]) * (b - a)[1]) / max(sp["length_m"], 1e-9) ** 2
+        sp["n_points"] = int(np.sum((allp["obj"] == sp["wire_id"]) & (t >= 0) & (t < 1)))
+    truth["scanner"] = {"kind": "mobile", "track": track, "height_over_ground_m": MOBILE_TRACK_HEIGHT_M,
+                        "full_density_range_m": full_density_range_m}
 
 
 MOBILE_TRACK_HEIGHT_M = 2.0  # a car-mounted scanner's head over the road
