@@ -75,3 +75,22 @@ def roofs_scene(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("roofs") / "roofs.laz"
     toolbox.run("synthetic-scene", [], out, kind="roofs", seed=2, density_ppm2=8.0)
     return out
+
+
+# in a conftest: a session fixture imported into two test modules is set up once per module
+@pytest.fixture(scope="session")
+def oakland_runs(tmp_path_factory):
+    """``powerlines`` at default parameters on each Oakland street scan in ../shared, once for the
+    tests that read them: {name: (source, gpkg, classified, report)} (a scan absent is left out)."""
+    import toolbox
+
+    from pl_helpers import OAKLAND_SCANS
+
+    d = tmp_path_factory.mktemp("oakland")
+    out = {}
+    for name in OAKLAND_SCANS:
+        path = SHARED_DATA / f"oakland_mls/oakland_{name}.laz"
+        if path.exists():
+            rep = toolbox.run("powerlines", path, d / f"{name}.gpkg", outputs={"classified": str(d / f"{name}_w.laz")})
+            out[name] = (path, d / f"{name}.gpkg", d / f"{name}_w.laz", rep)
+    return out

@@ -280,3 +280,18 @@ def chain_until(path, until: str | None, **params):
     ctx = Context(reg, "powerlines", quiet=True)
     scene, st = run_chain(read_points(path), settings, ctx, until=until)
     return scene, st, settings, ctx
+
+
+OAKLAND_SCANS = ("part3_an", "part3_ak", "part2_ai", "part2_aj", "part2_ag", "part2_al", "part2_ae", "part3_aj")
+
+
+def oakland_run(runs, name):
+    """One scan's run from ``oakland_runs``, or skip with the reason."""
+    shared_file(f"oakland_mls/oakland_{name}.laz")
+    return runs[name]
+
+
+def wire_points(source, classified):
+    """(truth, predicted) wire-point masks: class 14 of the source (the CMU labels) and of the output."""
+    return (np.asarray(laspy.read(source).classification) == 14,
+            np.asarray(laspy.read(classified).classification) == 14)

@@ -8,7 +8,15 @@ import laspy
 import numpy as np
 import pytest
 from conftest import shared_file
-from pl_helpers import _ahn4_real, chain_until, corridor, corridor_result  # noqa: F401 (fixtures)
+from pl_helpers import (  # noqa: F401 (fixtures)
+    OAKLAND_SCANS,
+    _ahn4_real,
+    chain_until,
+    corridor,
+    corridor_result,
+    oakland_run,
+    wire_points,
+)
 from toolbox_plugins.powerlines.evaluation import conductor_hits, crossing_errors, false_crossings
 
 import toolbox
@@ -513,29 +521,28 @@ def test_ahn4_corridors_at_default_parameters(name, min_precision, min_recall, t
 
 
 
+@pytest.mark.xdist_group("oakland")  # one worker runs the scans once for every test that reads them
 @pytest.mark.parametrize("name, min_precision, min_recall", [("part3_an", 0.92, 0.90), ("part3_ak", 0.97, 0.9),
                                                               ("part2_ai", 0.90, 0.90)])
-def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp_path):
+def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, oakland_runs):
     """Oakland mobile scans (a car-mounted scanner under distribution wires), no setting: wire
     points against the CMU wire labels (class 14), the issue's 0.90 on each. part3_an: wires
     0.3-1 m above one another, a service drop, wires leaving the tile a few metres past a pole;
     part3_ak: wires seen for 5-8 m between crowns (and a truck's top edge under them); part2_ai:
     a sparse upper wire past the last pole, the lower one through crowns."""
-    path = shared_file(f"oakland_mls/oakland_{name}.laz")
-    toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
-    truth = np.asarray(laspy.read(path).classification) == 14
-    pred = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    path, gpkg, classified, _ = oakland_run(oakland_runs, name)
+    truth, pred = wire_points(path, classified)
     precision, recall = (truth & pred).sum() / pred.sum(), (truth & pred).sum() / truth.sum()
     assert precision >= min_precision and recall >= min_recall, (precision, recall)
     # every drawn span is a wire's: its catenary fits (part2_ai's pieces through crowns do not)
-    c3 = gpd.read_file(tmp_path / "pl.gpkg", layer="conductors_3d")
+    c3 = gpd.read_file(gpkg, layer="conductors_3d")
     assert len(c3) and (c3.rms_m <= 0.2).all(), c3.rms_m.max()
     # the poles that carry the wires, against the CMU utility-pole label: every pole found stands
     # on one (within 0.5 m of its points' middle); part3_ak's, away from the wires scanned, are
     # not found
     src = laspy.read(path)
     labelled = np.column_stack([src.x, src.y])[np.asarray(src.cmu_label) == 1103]
-    py = gpd.read_file(tmp_path / "pl.gpkg", layer="pylons")
+    py = gpd.read_file(gpkg, layer="pylons")
     poles = py[py["kind"] == "pole"]
     assert len(poles) >= {"part3_an": 3, "part3_ak": 0, "part2_ai": 3}[name]
     # no tower on a street scan where the poles carry the wires (part2_ai: a crown where a next
@@ -545,16 +552,33 @@ def test_mobile_scans_at_default_parameters(name, min_precision, min_recall, tmp
         near = labelled[np.hypot(labelled[:, 0] - g.x, labelled[:, 1] - g.y) <= 1.0]
         assert len(near) >= 20 and np.hypot(*(near.mean(axis=0) - [g.x, g.y])) <= 0.5, (g.x, g.y)
     if len(poles):  # tower points: the poles' columns and heads, not the crowns beside them (P 0.06 before)
-        out = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 15
+        out = np.asarray(laspy.read(classified).classification) == 15
         labelled_15 = np.asarray(src.classification) == 15
         assert (out & labelled_15).sum() >= 0.6 * out.sum() and (out & labelled_15).sum() >= 0.5 * labelled_15.sum()
     # a cable's end clamped to a pole's side, 4-8 m under its top, is the pole's (CMU: pole), not
     # a wire's: no wire point inside a found pole's column under its head (part2_ai had 5, part3_an 12)
-    cls = np.asarray(laspy.read(tmp_path / "w.laz").classification)
+    cls = np.asarray(laspy.read(classified).classification)
     x, y, z = np.asarray(src.x), np.asarray(src.y), np.asarray(src.z)
     for g, height in zip(poles.geometry, poles["height_m"] if len(poles) else []):
         column = (np.hypot(x - g.x, y - g.y) <= 0.3) & (z < g.z + height - 1.0)
         assert not (column & (cls == 14)).any(), (g.x, g.y, int((column & (cls == 14)).sum()))
+
+@pytest.mark.xdist_group("oakland")
+@pytest.mark.xfail(strict=True, reason="#77 open (README, docs/powerlines.md): crowns' single rows are taken for "
+                   "wires and sparse service drops are missed; pooled P 0.714 / R 0.869, part2_ae 368 and part3_aj "
+                   "554 false points")
+def test_oakland_street_scans_reach_the_issues_targets(oakland_runs):
+    """#77's targets over the eight Oakland scans in ../shared, at default parameters: pooled
+    wire-point P >= 0.92 and R >= 0.90, at most 20 false wire points on each scan without a wire."""
+    runs = [oakland_run(oakland_runs, name) for name in OAKLAND_SCANS]
+    tp = n_pred = n_true = 0
+    for path, _, classified, _ in runs:
+        truth, pred = wire_points(path, classified)
+        tp, n_pred, n_true = tp + (truth & pred).sum(), n_pred + pred.sum(), n_true + truth.sum()
+        if not truth.any():
+            assert pred.sum() <= 20, (path.name, pred.sum())
+    assert tp / n_pred >= 0.92 and tp / n_true >= 0.90, (tp / n_pred, tp / n_true)
+
 
 
 

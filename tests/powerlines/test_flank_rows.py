@@ -1,13 +1,10 @@
 """Stage 10, flank rows (#77): the rows a profile scanner leaves on a crown's flank seen side-on
 are no wires; a pole line's stacked wires are."""
 
-import laspy
 import numpy as np
 import pytest
-from conftest import shared_file
+from pl_helpers import oakland_run, wire_points
 from toolbox_plugins.powerlines.core import FLANK_MIN_ROWS, Span, flank_rows
-
-import toolbox
 
 
 def _level(conductor, wire, z, s_from, s_to, c=1e4):
@@ -34,16 +31,15 @@ def test_rows_up_a_flank_ending_together_are_dropped_and_a_pole_lines_stack_is_k
     assert flank_rows(stack + [_level(1, 6, 9.0, 0.5, 34.5)]) == list(range(FLANK_MIN_ROWS))
 
 
+@pytest.mark.xdist_group("oakland")  # the scans' runs are made once, for test_chain's too
 @pytest.mark.parametrize("name, max_false, before", [("part2_ae", 400, 1373), ("part2_al", 300, 544)])
-def test_crown_flanks_on_street_scans_are_no_wires(name, max_false, before, tmp_path):
+def test_crown_flanks_on_street_scans_are_no_wires(name, max_false, before, oakland_runs):
     """The develop half's crowns (#77): part2_ae holds no wire and its trees gave 1,373 false wire
     points, part2_al 544 against 52 true; the flanks' rows go, the wire stays (the issue's 20
     false points on a wire-free scan are not reached: crowns' single rows remain)."""
-    path = shared_file(f"oakland_mls/oakland_{name}.laz")
-    rep = toolbox.run("powerlines", path, tmp_path / "pl.gpkg", outputs={"classified": str(tmp_path / "w.laz")})
+    path, _, classified, rep = oakland_run(oakland_runs, name)
     assert rep["stats"]["n_flank_row_spans"] >= FLANK_MIN_ROWS
-    truth = np.asarray(laspy.read(path).classification) == 14
-    pred = np.asarray(laspy.read(tmp_path / "w.laz").classification) == 14
+    truth, pred = wire_points(path, classified)
     assert (pred & ~truth).sum() <= max_false < before
     if truth.any():
         assert (truth & pred).sum() / truth.sum() >= 0.94  # its one wire, as before the stage
