@@ -684,19 +684,28 @@ class SegmentIndex:
         if self.tree is None or not n:
             return none, none.copy()
         dist, j = self.tree.query(uv, k=k, distance_upper_bound=radius_px, workers=-1)  # every core: same answer
-        ok = np.isfinite(dist)
-        s = np.where(ok, self.sid[np.minimum(j, len(self.sid) - 1)], 0)
-        dirs = self.dir[s]
-        ok &= np.abs(np.einsum("nkc,nc->nk", dirs, d)) >= np.cos(np.radians(angle_deg))
-        rel = self.p[s] - uv[:, None, :]
-        along = -np.einsum("nkc,nkc->nk", rel, dirs)
+        # only the neighbours found (most of the k slots are empty): per pair, its segment's
+        # direction, reach along it and side
+        row, slot = np.nonzero(np.isfinite(dist))
+        s = self.sid[j[row, slot]]
+        dirs, dr = self.dir[s], d[row]
+        ok = np.abs(dirs[:, 0] * dr[:, 0] + dirs[:, 1] * dr[:, 1]) >= np.cos(np.radians(angle_deg))
+        rel = self.p[s] - uv[row]
+        along = -(rel[:, 0] * dirs[:, 0] + rel[:, 1] * dirs[:, 1])
         ok &= (along >= -1.0) & (along <= self.length[s] + 1.0)
-        off = np.einsum("nkc,nc->nk", rel, np.column_stack([-d[:, 1], d[:, 0]]))
-        right = np.where(ok & (off >= 0), off, np.inf)
-        left = np.where(ok & (off < 0), -off, np.inf)
-        r = np.arange(n)
-        ir, il = np.argmin(right, axis=1), np.argmin(left, axis=1)
-        return (np.where(np.isfinite(left[r, il]), s[r, il], -1), np.where(np.isfinite(right[r, ir]), s[r, ir], -1))
+        off = rel[:, 0] * -dr[:, 1] + rel[:, 1] * dr[:, 0]
+        return self._nearest(n, row, slot, s, ok & (off < 0), -off), self._nearest(n, row, slot, s, ok & (off >= 0), off)
+
+    @staticmethod
+    def _nearest(n, row, slot, s, mask, dist):
+        """Per point, the segment of the closest pair in ``mask`` (ties: the nearer neighbour
+        slot, as an argmin over the slots), -1 where none."""
+        out = np.full(n, -1)
+        row, slot, s, dist = row[mask], slot[mask], s[mask], dist[mask]
+        order = np.lexsort((slot, dist, row))
+        first = order[np.r_[True, row[order][1:] != row[order][:-1]]] if len(order) else order
+        out[row[first]] = s[first]
+        return out
 
 
 def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, radii_px=(6.0, 4.0, 3.0),
