@@ -127,14 +127,20 @@ def append_conductors(lines: dict, more: dict, n0: int) -> dict:
 def keep_conductors(keep_lines, lines, geo, spans, line_of, wire_of_pt):
     """Only the given conductors (renumbered) in the layers, the geometry, the spans and the
     per-point conductor and wire of the 3D step."""
-    new_id = np.full(len(geo) + 1, -1, np.int64)  # old conductor -> new (-1: dropped; -1 stays -1)
-    new_id[keep_lines] = np.arange(len(keep_lines))
+    new_id = renumbering(keep_lines, len(geo))
     line_of = new_id[line_of]
     wire_of_pt = np.where(line_of < 0, -1, wire_of_pt)
     spans = [sp for sp in spans if new_id[sp.conductor] >= 0]
     for sp in spans:
         sp.conductor = int(new_id[sp.conductor])
     return select_conductors(lines, keep_lines), [geo[i] for i in keep_lines], spans, line_of, wire_of_pt
+
+
+def renumbering(keep_lines, n_lines: int) -> np.ndarray:
+    """Old conductor -> new, indexed by a per-point conductor (-1: dropped; -1 stays -1)."""
+    new_id = np.full(n_lines + 1, -1, np.int64)
+    new_id[keep_lines] = np.arange(len(keep_lines))
+    return new_id
 
 
 def select_conductors(lines: dict, keep: list) -> dict:

@@ -703,7 +703,7 @@ class SegmentIndex:
         out = np.full(n, -1)
         row, slot, s, dist = row[mask], slot[mask], s[mask], dist[mask]
         order = np.lexsort((slot, dist, row))
-        first = order[np.r_[True, row[order][1:] != row[order][:-1]]] if len(order) else order
+        first = order[np.unique(row[order], return_index=True)[1]]  # each point's first, in that order
         out[row[first]] = s[first]
         return out
 

@@ -54,6 +54,7 @@ from .catenaries import (  # noqa: F401
     split_spans,
 )
 from .clutter import (  # noqa: F401
+    FLANK_EDGE_M,
     FLANK_MIN_ROWS,
     FLANK_ROW_GAP_M,
     AlongSurfaceRules,

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import time
 
-from . import cleaning, flank_rows, ground, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection, supports
+from . import (cleaning, flank_rows, ground, more_wires, next_spans, plan_lines, plan_split, pole_wires, rejection,
+               supports)
 
 CHAIN = (("plan_lines", plan_lines.stage), ("more_wires", more_wires.stage), ("rejection", rejection.stage),
          ("next_spans", next_spans.stage), ("supports", supports.stage), ("pole_wires", pole_wires.stage),

@@ -7,11 +7,9 @@ in the chain: run earlier, the cleaning's stacks and the lone points took the ro
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..core import flank_rows
 from ..state import PointLabels, State, Wires
-from ..wire_sets import drop_spans, keep_conductors
+from ..wire_sets import drop_spans, keep_conductors, renumbering
 
 
 def stage(scene, st: State, settings, ctx) -> State:
@@ -26,13 +24,10 @@ def stage(scene, st: State, settings, ctx) -> State:
         held = sorted({sp.conductor for sp in spans})
         n_lines = len(geo) - len(held)
         if n_lines:
-            fitted_of = st.fitted_of
+            if st.fitted_of is not None:  # the same renumbering: layers reads the wires' reach from it
+                st.fitted_of = renumbering(held, len(geo))[st.fitted_of]
             lines, geo, spans, conductor_of, wire_of_input = keep_conductors(held, lines, geo, spans, conductor_of,
                                                                              wire_of_input)
-            if fitted_of is not None:  # the same renumbering: layers reads the wires' reach from it
-                new_id = np.full(len(st.wires.geo) + 1, -1, np.int64)
-                new_id[held] = np.arange(len(held))
-                st.fitted_of = new_id[fitted_of]
         st.wires, st.labels = Wires(lines, geo, spans), PointLabels(conductor_of, wire_of_input)
     st.counts.update(n_flank_row_spans=len(gone), n_flank_row_lines=n_lines)
     return st
