@@ -263,6 +263,9 @@ class Algorithm:
     #: or a function of the validated parameters. None: no declared need (the user gives
     #: ``--buffer-m``; 0 otherwise).
     tile_buffer_m: float | Callable[[Mapping[str, Any]], float] | None = None
+    #: Peak memory of a run per input point (bytes), to refuse before reading a file this machine
+    #: cannot hold (``toolbox.memory.check_fits``). None: the host's default.
+    bytes_per_point: int | None = None
     #: Filled in by the registry: the plugin (entry-point name), distribution and version.
     plugin: str = ""
     distribution: str = ""

@@ -62,3 +62,33 @@ def total_ram_bytes() -> int:
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return 8 << 30
+
+
+DEFAULT_BYTES_PER_POINT = 150  # a dtm run's peak per point (5 M points, 0.76 GB); algorithms declare their own
+MEMORY_SHARE = 0.9  # of the memory free now: what a run may plan to take
+
+
+def available_ram_bytes() -> int:
+    """Memory free for a new run now (MemAvailable), or the machine's total where not known."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return total_ram_bytes()
+
+
+def check_fits(alg, path, n_points: int) -> None:
+    """Refuse, before reading, an input whose run would not fit in memory: the kernel would kill
+    it with no message. The way out is a survey run in tiles, whose memory is a tile's."""
+    from .errors import UsageError
+
+    per_point = alg.bytes_per_point or DEFAULT_BYTES_PER_POINT
+    need, free = n_points * per_point, available_ram_bytes() * MEMORY_SHARE
+    if need > free:
+        raise UsageError(
+            f"input {str(path)!r} holds {n_points:,} points: {alg.id} needs about {need / 2**30:.1f} GiB for them "
+            f"({per_point} bytes a point), more than the {free / 2**30:.1f} GiB free here; run it in tiles: "
+            f"toolbox run {alg.id} {path} -o FOLDER --tile-size-m 500")

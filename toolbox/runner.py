@@ -293,6 +293,26 @@ def _crs_label(crs) -> str | None:
 # Reading and writing
 # --------------------------------------------------------------------------------------------
 
+def _check_inputs_fit(alg, assigned, specs) -> None:
+    """Every LAS/LAZ input's point count (from its header) against the memory free for the run."""
+    import laspy
+
+    from .io.points import LAS_EXTENSIONS
+    from .memory import check_fits
+
+    for name, val in assigned.items():
+        for path in (val if isinstance(val, list) else [val]):
+            if specs[name].kind != "points" or not isinstance(path, (str, os.PathLike)) or \
+                    Path(path).suffix.lower() not in LAS_EXTENSIONS:
+                continue
+            try:
+                with laspy.open(path) as reader:
+                    n = int(reader.header.point_count)
+            except Exception:  # unreadable: read_points says why, in its own words
+                continue
+            check_fits(alg, path, n)
+
+
 def read_input(kind: str, path: str, crs=None, dims=None):
     if kind == "points":
         from .io.points import read_points
@@ -528,6 +548,7 @@ def _run_staged(algorithm_id, inputs, output, params, outputs, overwrite, crs, r
     check_outputs(alg, paths, _input_files(assigned), overwrite, reg.style_dirs, staging)
 
     specs = {s.name: s for s in alg.inputs}
+    _check_inputs_fit(alg, assigned, specs)
     # a run that writes points writes every dimension: read them all; otherwise only the declared
     writes_points = any(o.kind == "points" and o.name in paths for o in alg.outputs)
     data = {}

@@ -9,7 +9,9 @@
    out;
 3. each tile is read with a buffer (``--buffer-m``, by default what the algorithm declares with
    ``Algorithm.tile_buffer_m``) from every file that reaches it, in chunks: memory holds one tile
-   and its buffer, never a file or the survey;
+   and its buffer, never a file or the survey. A plain file that several tiles read is first
+   split by cell, in one pass, so that each point is decoded once (``survey_read``); of a COPC
+   file only the octree nodes that reach the tile are decoded;
 4. the algorithm runs on each tile in a worker (a local process pool, or the workers of a
    dask.distributed cluster); the worker drops what lies in the buffer (rasters cropped to the
    tile's cells, vector features kept by the tile whose core holds them, lines clipped to it,
@@ -17,7 +19,8 @@
 5. when every tile is done, the host merges: rasters into one Cloud Optimized GeoTIFF (streamed
    through a VRT, never the whole mosaic in memory), vector layers into one GeoPackage (lines
    cut at tile borders joined, ids renumbered, references followed: ``Output.merge``), point
-   outputs stay one LAZ per tile (``OUT/<output>/<tile>.laz``).
+   outputs stay one LAZ per tile (``OUT/<output>/<tile>.laz``), listed in ``OUT/<output>.vpc``
+   (a virtual point cloud: one layer in QGIS). A ``.vpc`` is also read as the files it lists.
 
 The output folder holds ``survey.json``, the manifest: the run's settings and each tile's state.
 A rerun with the same settings skips finished tiles (a run killed half-way goes on where it
@@ -38,20 +41,22 @@ import socket
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from . import kernels, progress
 from .algorithm import Algorithm, LayerMerge
 from .errors import DataError, ToolboxError, UsageError
+from .io.vpc import is_vpc, read_vpc, write_vpc
+from .survey_exec import _run_dask, _run_local
+from .survey_read import chunk_cell_size, read_tile, split_done, split_points
 
 log = logging.getLogger(__name__)
 
 MANIFEST = "survey.json"
 TILE_DIR = ".tiles"
-READ_CHUNK_POINTS = 1_000_000
-MAX_ATTEMPTS = 3  # a tile whose worker dies this often is reported failed
+CHUNK_DIR = "chunks"  # in TILE_DIR: the plain files split by cell (survey_read), removed after the merge
 SURVEY_EXTENSIONS = (".las", ".laz")
 
 
@@ -103,7 +108,8 @@ class Catalog:
 
 
 def expand_survey_inputs(items: Sequence[str]) -> list[str]:
-    """Files, folders (their .las/.laz files) and glob patterns, as one sorted list of files."""
+    """Files, folders (their .las/.laz files), glob patterns and virtual point clouds (``.vpc``: the
+    files they list), as one list of files."""
     out: list[str] = []
     for item in items:
         item = str(item)
@@ -118,12 +124,14 @@ def expand_survey_inputs(items: Sequence[str]) -> list[str]:
             if not found:
                 raise UsageError(f"pattern {item!r} matches no .las or .laz file")
             out.extend(found)
+        elif is_vpc(item) and p.exists():  # a virtual point cloud: the files it lists
+            out.extend(v.path for v in read_vpc(item))
         else:
             if not p.exists():
                 raise DataError(f"input {item!r} does not exist; check the path")
             if p.suffix.lower() not in SURVEY_EXTENSIONS:
                 raise UsageError(f"input {item!r}: a survey run reads LAS/LAZ files (their headers give the "
-                                 "bounds); convert it to LAZ first")
+                                 "bounds) or a .vpc listing them; convert it to LAZ first")
             out.append(item)
     seen, unique = set(), []
     for f in out:
@@ -136,9 +144,15 @@ def expand_survey_inputs(items: Sequence[str]) -> list[str]:
     return unique
 
 
-def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
+def listed_crs(items: Sequence[str]) -> dict:
+    """The CRS that the virtual point clouds among ``items`` give their files (path -> text)."""
+    return {v.path: v.crs for item in items if is_vpc(item) and Path(item).exists() for v in read_vpc(item) if v.crs}
+
+
+def build_catalog(paths: Sequence[str], crs=None, listed: Mapping[str, str] | None = None) -> Catalog:
     """Read every file's header (bounds, count, CRS). Files in different CRSs are an error, unless
-    ``crs`` (text or pyproj CRS) says what they all are in."""
+    ``crs`` (text or pyproj CRS) says what they all are in; a file whose header has no CRS takes
+    the one its ``.vpc`` lists for it (``listed``: path -> CRS text)."""
     import laspy
 
     from .io.points import _header_crs, check_las_header, crs_units, parse_crs
@@ -161,6 +175,8 @@ def build_catalog(paths: Sequence[str], crs=None) -> Catalog:
                         file_crs = _header_crs(hdr)
                     except Exception:  # malformed CRS records: as if it had none (said below)
                         file_crs = None
+                    if file_crs is None and (listed or {}).get(path):
+                        file_crs = parse_crs(listed[path])
         except (laspy.errors.LaspyException, OSError, ValueError) as exc:
             raise DataError(f"input {path!r} is not a readable LAS/LAZ file ({' '.join(str(exc).split())[:120]}); "
                             "repair or remove it from the survey") from None
@@ -244,76 +260,6 @@ def plan_tiles(catalog: Catalog, tile_size: float) -> list[Tile]:
             if any(f.minx < t.x1 and f.maxx >= t.x0 and f.miny < t.y1 and f.maxy >= t.y0 for f in catalog.files_in(t.box())):
                 tiles.append(t)
     return tiles
-
-
-def _without_copc_records(header):
-    """A copy of a COPC file's header for the tile's outputs: a tile's points are no octree, and
-    laspy writes no COPC records."""
-    import copy
-
-    out = copy.deepcopy(header)
-    for name in ("vlrs", "evlrs"):
-        records = getattr(out, name, None)
-        if records:
-            kept = [v for v in records if getattr(v, "user_id", "") != "copc"]
-            records.clear()
-            records.extend(kept)
-    return out
-
-
-def read_tile(files: Sequence[SurveyFile], tile: Tile, buffer: float, crs=None, dims=None,
-              chunk_points: int = READ_CHUNK_POINTS):
-    """The points of the tile and its buffer from ``files``, read in chunks (memory holds what
-    the box keeps plus one chunk; of a COPC file only the octree nodes that reach the box). Returns
-    (PointCloud, mask of the points in the tile's core, points decoded).
-    ``dims``: the dimensions to keep besides x, y, z (None: all those every file has)."""
-    import laspy
-
-    from .io.points import PointCloud, _apply_crs, _decode_errors
-
-    bx0, by0, bx1, by1 = tile.box(buffer)
-    xs, ys, zs, parts = [], [], [], []
-    header, names = None, None
-    decoded = 0
-    for f in files:
-        seen = 0
-        try:
-            with (laspy.CopcReader.open(f.path) if f.copc else laspy.open(f.path)) as reader:
-                hdr = reader.header
-                file_names = [n for n in hdr.point_format.dimension_names if n not in ("X", "Y", "Z")]
-                if header is None:
-                    header = _without_copc_records(hdr) if f.copc else hdr
-                names = file_names if names is None else [n for n in names if n in file_names]
-                keep_names = file_names if dims is None else [n for n in file_names if n in dims]
-                if f.copc:  # only the octree nodes that reach the box are decoded
-                    chunks = [reader.query(bounds=laspy.Bounds(mins=np.array([bx0, by0]), maxs=np.array([bx1, by1])))]
-                else:
-                    chunks = reader.chunk_iterator(chunk_points)
-                for chunk in chunks:
-                    seen += len(chunk)
-                    x = np.asarray(chunk.x)
-                    y = np.asarray(chunk.y)
-                    m = (x >= bx0) & (x < bx1) & (y >= by0) & (y < by1)
-                    if not m.any():
-                        continue
-                    xs.append(x[m])
-                    ys.append(y[m])
-                    zs.append(np.asarray(chunk.z)[m])
-                    parts.append({n: np.asarray(chunk[n])[m] for n in keep_names})
-        except _decode_errors() as exc:
-            raise DataError(f"input {f.path!r} is truncated or corrupt after {seen} points "
-                            f"({' '.join(str(exc).split())[:120]}); repair or re-download it") from None
-        decoded += seen
-        if not f.copc and seen != f.count:
-            raise DataError(f"input {f.path!r} is truncated: the header promises {f.count} points, the file holds "
-                            f"{seen}; re-download or re-export it")
-    keep = [n for n in (names or []) if dims is None or n in dims]
-    cat = (lambda arrs: np.concatenate(arrs)) if xs else (lambda arrs: np.empty(0))
-    fields = {n: np.concatenate([p[n] for p in parts]) for n in keep} if parts else {}
-    pc = PointCloud(x=cat(xs), y=cat(ys), z=cat(zs), fields=fields, source=f"tile {tile.name}", header=header)
-    _apply_crs(pc, crs, header)
-    core = (pc.x >= tile.x0) & (pc.x < tile.x1) & (pc.y >= tile.y0) & (pc.y < tile.y1)
-    return pc, core, decoded
 
 
 # --------------------------------------------------------------------------------------------
@@ -455,8 +401,10 @@ def run_tile(task: Mapping[str, Any]) -> dict:
         from .io.points import parse_crs
 
         crs = parse_crs(task["crs"]) if task.get("crs") else None
-        pc, core, decoded = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"))
+        pc, core, decoded, read = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"),
+                                            splits=task.get("splits"))
         stats = {"n_points": int(len(pc)), "n_core_points": int(core.sum()), "n_decoded_points": decoded,
+                 "n_read_points": read,
                  "read_s": round(time.perf_counter() - t0, 3)}
         if not core.any():
             return {**base, "status": "empty", "stats": stats, "outputs": {}, "layer_types": {},
@@ -524,106 +472,6 @@ def _write_tile_outputs(alg: Algorithm, outputs: Mapping[str, Any], task, tile: 
             continue
         written[name] = str(path)
     return written, layer_types
-
-
-# --------------------------------------------------------------------------------------------
-# Executors
-# --------------------------------------------------------------------------------------------
-
-def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None], on_start=None) -> None:
-    """Tiles in a process pool, at most ``workers`` at a time. A worker that dies (killed, out of
-    memory) breaks the pool: its tiles are retried on a fresh pool, up to MAX_ATTEMPTS times."""
-    import concurrent.futures as cf
-    import multiprocessing as mp
-    from concurrent.futures.process import BrokenProcessPool
-
-    queue = list(tasks)
-    attempts: dict[str, int] = {}
-    # workers start from a clean server process, not forked from the driver: a driver that has
-    # run GDAL (or any library with a thread pool) may hold a lock a forked child then waits on
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["toolbox.survey", "toolbox.runner"])
-    else:
-        ctx = mp.get_context("spawn")
-    while queue:
-        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
-        running: dict = {}
-        broken = False
-        try:
-            while queue or running:
-                while queue and not broken and len(running) < workers:
-                    task = queue.pop(0)
-                    name = Tile(**task["tile"]).name
-                    attempts[name] = attempts.get(name, 0) + 1
-                    running[pool.submit(run_tile, task)] = (task, name)
-                    if on_start:
-                        on_start(name)
-                if not running:
-                    break
-                done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
-                for fut in done:
-                    task, name = running.pop(fut)
-                    try:
-                        on_result(fut.result())
-                    except BrokenProcessPool:
-                        broken = True
-                        if attempts[name] < MAX_ATTEMPTS:
-                            queue.insert(0, task)
-                            log.warning("tile %s: its worker died; retrying it (attempt %d of %d)", name,
-                                        attempts[name] + 1, MAX_ATTEMPTS)
-                        else:
-                            on_result({"tile": name, "status": "failed", "stats": {}, "outputs": {}, "layer_types": {},
-                                       "error": f"its worker died {attempts[name]} times (killed, or out of memory: "
-                                                "try a smaller --tile-size-m or fewer --workers)"})
-                if broken and not running:
-                    break
-        except BaseException:  # Ctrl-C, SIGTERM: end the workers rather than wait for their tiles
-            from .runner import stop_workers
-
-            stop_workers(pool, running)
-            raise
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _run_dask(tasks: list[dict], scheduler, on_result: Callable[[dict], None], on_start=None) -> dict:
-    """Tiles on a dask.distributed cluster (an address, or a Client). Dask reschedules the tile
-    of a worker that dies (up to its ``allowed-failures``)."""
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise UsageError("--scheduler needs dask.distributed: pip install 'lidar-toolbox[cluster]'") from None
-    own = not hasattr(scheduler, "submit")
-    if own:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise DataError(f"could not reach the Dask scheduler at {scheduler!r} ({' '.join(str(exc).split())[:120]}); "
-                            "start one with 'dask scheduler' and workers with 'dask worker ADDRESS --nthreads 1'") from None
-    else:
-        client = scheduler
-    try:
-        info = client.scheduler_info()
-        n_workers = len(info.get("workers", {}))
-        futures = {}
-        for task in tasks:
-            name = Tile(**task["tile"]).name
-            fut = client.submit(run_tile, task, key=f"tile-{name}-{os.getpid()}-{time.time_ns()}", pure=False)
-            futures[fut] = name
-            if on_start:
-                on_start(name)
-        for fut in as_completed(list(futures)):
-            name = futures[fut]
-            try:
-                on_result(fut.result())
-            except Exception as exc:  # KilledWorker: its workers kept dying on this tile
-                on_result({"tile": name, "status": "failed", "stats": {}, "outputs": {}, "layer_types": {},
-                           "error": f"the cluster gave up on it: {type(exc).__name__}: {' '.join(str(exc).split())[:200]}"})
-        return {"address": client.scheduler.address, "n_workers": n_workers}
-    finally:
-        if own:
-            client.close()
 
 
 # --------------------------------------------------------------------------------------------
@@ -918,6 +766,7 @@ class SurveyPlan:
     tile_size_m: float
     buffer_m: float  # used
     buffer_declared_m: float | None
+    splits: list  # plain files to split before the tiles run (``split_points`` tasks)
 
 
 def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any] | None, *, tile_size_m: float,
@@ -940,7 +789,7 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
     named, kinds, wanted, out, paths = _survey_outputs(alg, output_dir, outputs)
 
     files = expand_survey_inputs(inputs)
-    catalog = build_catalog(files, crs)
+    catalog = build_catalog(files, crs, listed_crs(inputs))
     from .io.atomic import make_folder
 
     make_folder(out)  # (once the inputs are known to be readable: a refused run makes nothing)
@@ -1003,12 +852,33 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
     tasks = []
     for t in todo:
         box = t.box(buffer_used_m / hu)
-        tasks.append({**base_task, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
+        tasks.append({**base_task, "name": t.name, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
+    splits = plan_splits(catalog, tasks, tile_dir / CHUNK_DIR, chunk_cell_size(tile_size_m / hu, buffer_used_m / hu))
     if skipped:
         log.info("%d of %d tiles were done by an earlier run; skipping them", len(skipped), len(tiles))
 
     return SurveyPlan(alg, values, crs, out, wanted, paths, catalog, tiles, skipped, tasks, state, manifest_path,
-                      tile_size_m, buffer_used_m, declared)
+                      tile_size_m, buffer_used_m, declared, splits)
+
+
+def plan_splits(catalog: Catalog, tasks: list[dict], folder: Path, cell: float) -> list[dict]:
+    """The plain (not COPC) files that more than one tile reads are split once (survey_read),
+    rather than scanned by every tile: each tile task names the folders it reads them from; the
+    returned ``split_points`` tasks are those not split by an earlier run."""
+    users: dict[str, int] = {}
+    for task in tasks:
+        for f in task["files"]:
+            if not f["copc"]:
+                users[f["path"]] = users.get(f["path"], 0) + 1
+    folders = {f.path: folder / f"{i:05d}" for i, f in enumerate(catalog.files) if users.get(f.path, 0) > 1}
+    for task in tasks:
+        task["splits"] = {f["path"]: str(folders[f["path"]]) for f in task["files"] if f["path"] in folders}
+    splits = []
+    for f in catalog.files:
+        if f.path in folders and not split_done(folders[f.path], asdict(f), cell):
+            splits.append({"name": f"split {Path(f.path).name}", "file": asdict(f), "folder": str(folders[f.path]),
+                           "cell": cell})
+    return splits
 
 
 def _survey_outputs(alg, output_dir, outputs: Mapping[str, str] | None):
@@ -1070,19 +940,50 @@ def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=No
         bar.update(1)
 
     _write_json_atomic(manifest_path, state)
+    t0 = time.perf_counter()
+    split = _split_files(plan, workers, scheduler)
+    t_split = time.perf_counter() - t0
     cluster = None
     n_workers = None
     if tasks:
         if scheduler is not None:
-            cluster = _run_dask(tasks, scheduler, on_result, on_start)
+            cluster = _run_dask(tasks, scheduler, on_result, on_start, fn=run_tile)
             n_workers = cluster["n_workers"]
         else:
             n_workers = max(1, min(workers or os.cpu_count() or 1, len(tasks)))
-            _run_local(tasks, n_workers, on_result, on_start)
+            _run_local(tasks, n_workers, on_result, on_start, fn=run_tile)
     bar.close()
 
     return {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
-            "worker_peak_rss_mb": worker_peaks}
+            "worker_peak_rss_mb": worker_peaks, "split": {**split, "seconds": round(t_split, 3)}}
+
+
+def _split_files(plan: SurveyPlan, workers: int | None, scheduler) -> dict:
+    """Phase one: the plan's plain files split by cell, on the same pool or cluster as the tiles.
+    A file that fails to split is read directly by its tiles (which then fail with its reason)."""
+    results: list[dict] = []
+    if plan.splits:
+        bar = progress.bar(total=len(plan.splits), desc="splitting files", unit="file", leave=False)
+
+        def on_result(res):
+            results.append(res)
+            bar.update(1)
+
+        if scheduler is not None:
+            _run_dask(plan.splits, scheduler, on_result, fn=split_points)
+        else:
+            _run_local(plan.splits, max(1, min(workers or os.cpu_count() or 1, len(plan.splits))), on_result,
+                       fn=split_points)
+        bar.close()
+    failed = {r["file"] for r in results if r.get("status") != "done" and "file" in r}
+    failed |= {t["file"]["path"] for t in plan.splits if t["name"] in {r["tile"] for r in results if "file" not in r}}
+    for path in failed:
+        log.warning("%s could not be split (%s); its tiles read it whole",
+                    path, next((r.get("error") for r in results if r.get("file") == path), "its worker died"))
+    for task in plan.tasks:
+        task["splits"] = {p: d for p, d in task.get("splits", {}).items() if p not in failed}
+    done = [r for r in results if r.get("status") == "done"]
+    return {"n_files": len(done), "n_decoded_points": sum(r["n_decoded_points"] for r in done)}
 
 
 def merge_survey(plan: SurveyPlan, style_dirs) -> tuple[list, dict]:
@@ -1101,6 +1002,7 @@ def merge_survey(plan: SurveyPlan, style_dirs) -> tuple[list, dict]:
             staging.commit()
         state["merged"] = True
         _write_json_atomic(manifest_path, state)
+        shutil.rmtree(manifest_path.parent / TILE_DIR / CHUNK_DIR, ignore_errors=True)
     return failed, written
 
 
@@ -1161,7 +1063,9 @@ def _merge_outputs(alg: Algorithm, wanted, paths, tiles, state, catalog, style_d
             write_vectors(layers, target, style_dirs=style_dirs, overwrite=overwrite)
             written[o.name] = {"path": str(target), "kind": "vector", "layers": {n: int(len(g)) for n, g in layers.items()}}
         elif o.kind == "points":
-            written[o.name] = {"path": str(target), "kind": "points", "files": len(parts),
+            # one layer in QGIS (and one input to PDAL's wrench or a later survey): the tiles' files as a .vpc
+            vpc = write_vpc(Path(target).with_suffix(".vpc"), [p for _, p in parts], overwrite=True) if parts else None
+            written[o.name] = {"path": str(target), "kind": "points", "files": len(parts), "vpc": str(vpc) if vpc else None,
                                "n_points": sum(int(state["tiles"][n]["stats"].get("n_core_points", 0)) for n, _ in parts)}
         elif o.kind == "json":
             data = {name: json.loads(Path(p).read_text(encoding="utf-8")) for name, p in parts}

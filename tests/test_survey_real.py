@@ -1,0 +1,167 @@
+"""Survey runs on real files (#81): each point decoded once, virtual point clouds in and out, a
+file too large for memory refused, and tiles against one run over the whole file.
+
+The survey is lidR's Topography.laz (hilly forest with a lake, 0.9 points/m²) split into 2 x 2
+delivery files, run in 100 m tiles; the reference is one run over the file."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+import rasterio
+
+import toolbox
+from toolbox import DataError, UsageError
+from toolbox.io.vpc import read_vpc, write_vpc
+from toolbox.survey import build_catalog, expand_survey_inputs, plan_tiles, run_survey, split_file
+from toolbox.survey_read import chunk_cell_size, read_tile, split_points
+
+from conftest import shared_file
+
+pytestmark = pytest.mark.xdist_group("survey")  # the runs below use 2 processes each
+
+
+@pytest.fixture(scope="session")
+def topography(tmp_path_factory):
+    src = shared_file("lidR/Topography.laz")
+    d = tmp_path_factory.mktemp("topography")
+    (d / "split").mkdir()
+    files = split_file(src, d / "split", 2, 2)
+    ref = d / "ref"
+    ref.mkdir()
+    toolbox.run("dtm", src, ref / "dtm.tif")
+    run = run_survey("dtm", [d / "split"], d / "survey", tile_size_m=100, workers=2)
+    return {"src": src, "dir": d, "split": d / "split", "files": files, "dtm": ref / "dtm.tif", "survey": d / "survey",
+            "report": run}
+
+
+def _dtm_diff(ref_path, path):
+    """(cells over 1 cm apart, max difference, cells with data in one only) on one lattice."""
+    with rasterio.open(ref_path) as a, rasterio.open(path) as b:
+        assert a.res == b.res and a.crs == b.crs and a.shape == b.shape and a.transform == b.transform
+        A, B = a.read(1, masked=True).filled(np.nan), b.read(1, masked=True).filled(np.nan)
+    both = np.isfinite(A) & np.isfinite(B)
+    d = np.abs(A - B)[both]
+    return int((d > 0.01).sum()), float(d.max()), int((np.isfinite(A) != np.isfinite(B)).sum())
+
+
+def test_a_tile_read_through_the_split_holds_the_points_a_scan_gives(topography, tmp_path):
+    """The split files give each tile the same points, in the same order, with every dimension,
+    as scanning the files; and reading whole chunk cells takes at most 1.5 x the tile's points."""
+    catalog = build_catalog(expand_survey_inputs([topography["split"]]))
+    cell = chunk_cell_size(100.0, 60.0)
+    splits = {}
+    for i, f in enumerate(catalog.files):
+        res = split_points({"name": f"split {i}", "file": asdict(f), "folder": str(tmp_path / str(i)), "cell": cell})
+        assert res["status"] == "done" and res["n_decoded_points"] == f.count
+        splits[f.path] = str(tmp_path / str(i))
+    tiles = plan_tiles(catalog, 100.0)
+    assert len(tiles) == 16
+    for t in tiles:
+        files = catalog.files_in(t.box(60.0))
+        a, core_a, dec_a, read_a = read_tile(files, t, 60.0)
+        b, core_b, dec_b, read_b = read_tile(files, t, 60.0, splits=splits)
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.y, b.y) and np.array_equal(a.z, b.z)
+        assert sorted(a.fields) == sorted(b.fields) and all(np.array_equal(a.fields[k], b.fields[k]) for k in a.fields)
+        assert np.array_equal(core_a, core_b)
+        assert dec_a == sum(f.count for f in files) and dec_b == 0  # a scan decodes every file it touches
+        assert len(b) <= read_b <= 1.5 * len(b)
+
+
+def test_a_truncated_file_is_not_split_and_its_tiles_fail_with_the_reason(topography, tmp_path):
+    bad = tmp_path / "cut.laz"
+    data = Path(topography["files"][0]).read_bytes()
+    bad.write_bytes(data[: len(data) // 2])
+    f = build_catalog([str(bad)]).files[0]
+    res = split_points({"name": "split cut", "file": asdict(f), "folder": str(tmp_path / "s"), "cell": 25.0})
+    assert res["status"] == "failed" and "cut.laz" in res["error"] and "re-download" in res["error"]
+    assert not (tmp_path / "s").exists()  # no partial split is left to be mistaken for one
+
+
+def test_a_survey_of_plain_files_decodes_each_point_once(topography):
+    rep = topography["report"]
+    assert rep["n_failed"] == 0 and rep["n_tiles"] == 16
+    split = rep["execution"]["split"]
+    assert split["n_files"] == 4 and split["n_decoded_points"] == rep["survey"]["n_points"] == 73_403
+    tiles = json.loads((topography["survey"] / "survey.json").read_text())["tiles"].values()
+    assert sum(t["stats"]["n_decoded_points"] for t in tiles) == 0  # no tile decodes a file again
+    in_boxes = sum(t["stats"]["n_points"] for t in tiles)
+    assert sum(t["stats"]["n_read_points"] for t in tiles) <= 1.5 * in_boxes
+    assert sum(t["stats"]["n_core_points"] for t in tiles) == 73_403
+    assert not (topography["survey"] / ".tiles" / "chunks").exists()  # the scratch split is gone after the merge
+
+
+def test_vpc_in_gives_the_survey_of_its_files_and_vpc_out_lists_the_tiles(topography, tmp_path):
+    """A .vpc beside other folders (hrefs ../split/...) reads as its files; the survey writes
+    classified.vpc over its per-tile LAZ files, which reads back as the same points."""
+    (tmp_path / "vpcs").mkdir()
+    vpc = write_vpc(tmp_path / "vpcs" / "topography.vpc", topography["files"])
+    doc = json.loads(vpc.read_text())
+    assert doc["type"] == "FeatureCollection" and len(doc["features"]) == 4
+    item = doc["features"][0]
+    assert item["stac_version"] == "1.0.0" and item["assets"]["data"]["href"].startswith("./")
+    assert "EPSG" in item["properties"]["proj:wkt2"] and len(item["properties"]["proj:bbox"]) == 6
+    assert -71.0 < item["bbox"][0] < -70.8 and 47.5 < item["bbox"][1] < 47.7  # WGS 84 (MTM zone 7, Québec)
+    assert [v.path for v in read_vpc(vpc)] == [str(Path(f).resolve()) for f in topography["files"]]
+    rep = run_survey("dtm", [vpc], tmp_path / "out", tile_size_m=100, workers=2)
+    assert rep["survey"]["n_files"] == 4 and rep["n_failed"] == 0
+    assert (tmp_path / "out" / "dtm.tif").read_bytes() == (topography["survey"] / "dtm.tif").read_bytes()
+    out_vpc = Path(rep["outputs"]["classified"]["vpc"])
+    assert out_vpc == tmp_path / "out" / "classified.vpc"
+    items = read_vpc(out_vpc)
+    assert len(items) == 16 and sum(i.count for i in items) == 73_403
+    assert all(Path(i.path).parent == tmp_path / "out" / "classified" for i in items)
+    for i in items:  # each item's bounds are its file's
+        hdr = laspy.open(i.path).header
+        assert i.count == hdr.point_count and np.allclose(i.bbox[:3], hdr.mins) and np.allclose(i.bbox[3:], hdr.maxs)
+
+
+def test_vpc_errors_name_the_file_and_the_fix(topography, tmp_path):
+    gone = tmp_path / "gone.vpc"
+    write_vpc(gone, topography["files"][:1])
+    doc = json.loads(gone.read_text())
+    doc["features"][0]["assets"]["data"]["href"] = "./missing.laz"
+    gone.write_text(json.dumps(doc))
+    with pytest.raises(DataError, match=r"gone.vpc.*lists './missing.laz', which does not exist"):
+        expand_survey_inputs([str(gone)])
+    other = tmp_path / "other.vpc"
+    other.write_text(json.dumps({"type": "Feature"}))
+    with pytest.raises(DataError, match=r"other.vpc.*is not a virtual point cloud.*build_vpc"):
+        expand_survey_inputs([str(other)])
+
+
+def test_a_file_without_crs_takes_the_one_its_vpc_gives(tmp_path):
+    src = shared_file("ahn3_amsterdam/ahn_2386_9702.laz")  # no CRS in the file (RD New per its source)
+    assert build_catalog([str(src)]).crs is None
+    vpc = write_vpc(tmp_path / "ahn3.vpc", [src])
+    doc = json.loads(vpc.read_text())
+    doc["features"][0]["properties"]["proj:epsg"] = 28992
+    doc["features"][0]["properties"]["proj:wkt2"] = ""
+    vpc.write_text(json.dumps(doc))
+    from toolbox.survey import listed_crs
+
+    catalog = build_catalog(expand_survey_inputs([str(vpc)]), listed=listed_crs([str(vpc)]))
+    assert catalog.crs.to_epsg() == 28992
+
+
+def test_a_file_larger_than_memory_is_refused_before_reading(topography, tmp_path, monkeypatch):
+    import toolbox.memory
+
+    monkeypatch.setattr(toolbox.memory, "available_ram_bytes", lambda: 8 << 20)  # 8 MiB free
+    with pytest.raises(UsageError, match=r"Topography.laz' holds 73,403 points: dtm needs about .* GiB .* "
+                                         r"run it in tiles: toolbox run dtm .* --tile-size-m"):
+        toolbox.run("dtm", topography["src"], tmp_path / "dtm.tif")
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+@pytest.mark.xfail(strict=True, reason="#81: the DTM's harmonic fills and its point spacing are computed from the "
+                   "whole input; on this sparse forest tiles differ from the whole run (9,488 cells by > 1 cm, up to "
+                   "2.5 m, 1,044 in nodata)")
+def test_dtm_in_tiles_equals_the_whole_run_on_a_sparse_real_survey(topography):
+    over, worst, only = _dtm_diff(topography["dtm"], topography["survey"] / "dtm.tif")
+    assert over == 0 and only == 0, (over, worst, only)

@@ -1,0 +1,212 @@
+"""Reading a survey's points tile by tile, each point decoded about once.
+
+A tile needs the points of its core and its buffer. Of a COPC file only the octree nodes that
+reach the box are decoded. A plain LAS/LAZ file has no spatial index, so a tile could only scan
+all of it, and a file that reaches many tiles would be decoded once per tile. Such a file is
+therefore *split* first, in one pass (``split_points``): its point records, as they are in the
+file, go into scratch files by cell of a grid finer than the tiles (``chunk_cell_size``); a tile
+then reads only the cells its box touches, and puts their points back in file order, so that it
+holds exactly the points, in the order, that a scan of the file would have given it. This is
+lastile's and lidR's ``catalog_retile`` step, done by the survey itself and removed after it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .errors import DataError
+
+READ_CHUNK_POINTS = 1_000_000
+INDEX = "index.json"
+CELLS_PER_BOX = 8  # chunk cells across a tile's box: reading whole cells then takes at most ~1.3x its points
+
+
+def chunk_cell_size(tile_size: float, buffer: float) -> float:
+    """The chunk grid's cell (CRS units): the tile's size over a whole number, so that tile and
+    chunk borders coincide, and about 1/8 of the tile's box."""
+    m = max(1, int(np.ceil(CELLS_PER_BOX * tile_size / (tile_size + 2 * buffer))))
+    return tile_size / m
+
+
+def _cell_keys(x, y, cell: float) -> np.ndarray:
+    ix = np.floor(x / cell).astype(np.int64)
+    iy = np.floor(y / cell).astype(np.int64)
+    return (ix << 32) ^ (iy & 0xFFFFFFFF)
+
+
+def _key_name(key: int) -> str:
+    ix, iy = int(key) >> 32, int(np.int64(key) & 0xFFFFFFFF)
+    iy = iy - (1 << 32) if iy >= 1 << 31 else iy
+    return f"{ix}_{iy}"
+
+
+def split_done(folder: Path, source: Mapping[str, Any], cell: float) -> bool:
+    """Whether ``folder`` holds a finished split of ``source`` (a SurveyFile as a dict) on ``cell``."""
+    try:
+        idx = json.loads((Path(folder) / INDEX).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (idx.get("source") == [source["path"], source["size"], source["mtime_ns"]] and idx.get("cell") == cell
+            and idx.get("done") is True)
+
+
+def split_points(task: Mapping[str, Any]) -> dict:
+    """One pass over a plain LAS/LAZ file (``task["file"]``, a SurveyFile as a dict): its point
+    records into ``task["folder"]``, one ``<ix>_<iy>.pts`` (raw records) and ``.idx`` (their
+    positions in the file) per cell of ``task["cell"]``. Never raises: a failure (a truncated or
+    corrupt file) is returned with its reason and leaves no folder; the tiles that need the file
+    then read it directly and fail with the same reason."""
+    import laspy
+
+    from .io.points import _decode_errors
+
+    t0 = time.perf_counter()
+    f, folder, cell = task["file"], Path(task["folder"]), float(task["cell"])
+    base = {"tile": task["name"], "pid": os.getpid(), "file": f["path"]}
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    counts: dict[str, int] = {}
+    seen = 0
+    try:
+        with laspy.open(f["path"]) as reader:
+            for chunk in reader.chunk_iterator(READ_CHUNK_POINTS):
+                keys = _cell_keys(np.asarray(chunk.x), np.asarray(chunk.y), cell)
+                order = np.argsort(keys, kind="stable")
+                cells, starts = np.unique(keys[order], return_index=True)
+                ends = np.r_[starts[1:], len(order)]
+                raw = chunk.array
+                for key, a, b in zip(cells, starts, ends):
+                    name = _key_name(key)
+                    pick = order[a:b]
+                    with open(folder / f"{name}.pts", "ab") as out:
+                        raw[pick].tofile(out)
+                    with open(folder / f"{name}.idx", "ab") as out:
+                        (pick + seen).astype(np.int64).tofile(out)
+                    counts[name] = counts.get(name, 0) + int(b - a)
+                seen += len(chunk)
+        if seen != f["count"]:
+            raise DataError(f"input {f['path']!r} is truncated: the header promises {f['count']} points, the file "
+                            f"holds {seen}; re-download or re-export it")
+    except (DataError, *_decode_errors()) as exc:
+        shutil.rmtree(folder, ignore_errors=True)
+        error = str(exc) if isinstance(exc, DataError) else (
+            f"input {f['path']!r} is truncated or corrupt after {seen} points ({' '.join(str(exc).split())[:120]}); "
+            "repair or re-download it")
+        return {**base, "status": "failed", "error": error, "seconds": round(time.perf_counter() - t0, 3)}
+    index = {"source": [f["path"], f["size"], f["mtime_ns"]], "cell": cell, "n_points": seen, "cells": counts,
+             "done": True}
+    tmp = folder / (INDEX + ".partial")
+    tmp.write_text(json.dumps(index), encoding="utf-8")
+    os.replace(tmp, folder / INDEX)
+    return {**base, "status": "done", "n_decoded_points": seen, "n_cells": len(counts),
+            "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _split_record(reader, folder: Path, box) -> tuple[Any, int]:
+    """The records of a split file in the cells that reach ``box``, in file order, and how many
+    were read."""
+    import laspy
+
+    idx = json.loads((folder / INDEX).read_text(encoding="utf-8"))
+    cell = float(idx["cell"])
+    bx0, by0, bx1, by1 = box
+    dtype = reader.header.point_format.dtype()
+    arrays, positions = [], []
+    for ix in range(int(np.floor(bx0 / cell)), int(np.floor(bx1 / cell)) + 1):
+        for iy in range(int(np.floor(by0 / cell)), int(np.floor(by1 / cell)) + 1):
+            name = f"{ix}_{iy}"
+            if name in idx["cells"]:
+                arrays.append(np.fromfile(folder / f"{name}.pts", dtype=dtype))
+                positions.append(np.fromfile(folder / f"{name}.idx", dtype=np.int64))
+    hdr = reader.header
+    if not arrays:
+        return laspy.ScaleAwarePointRecord.empty(header=hdr), 0
+    array, pos = np.concatenate(arrays), np.concatenate(positions)
+    array = array[np.argsort(pos, kind="stable")]
+    return laspy.ScaleAwarePointRecord(array, hdr.point_format, hdr.scales, hdr.offsets), len(array)
+
+
+def _without_copc_records(header):
+    """A copy of a COPC file's header for the tile's outputs: a tile's points are no octree, and
+    laspy writes no COPC records."""
+    import copy
+
+    out = copy.deepcopy(header)
+    for name in ("vlrs", "evlrs"):
+        records = getattr(out, name, None)
+        if records:
+            kept = [v for v in records if getattr(v, "user_id", "") != "copc"]
+            records.clear()
+            records.extend(kept)
+    return out
+
+
+def read_tile(files: Sequence, tile, buffer: float, crs=None, dims=None, chunk_points: int = READ_CHUNK_POINTS,
+              splits: Mapping[str, str] | None = None):
+    """The points of the tile and its buffer from ``files`` (SurveyFile), in chunks: memory holds
+    what the box keeps plus one chunk. A COPC file gives only the octree nodes that reach the box;
+    a file in ``splits`` (path -> folder of ``split_points``) only the cells that reach it; any
+    other is scanned. Returns (PointCloud, mask of the points in the core, points decoded from
+    the files, points read). ``dims``: the dimensions to keep besides x, y, z (None: all those
+    every file has)."""
+    import laspy
+
+    from .io.points import PointCloud, _apply_crs, _decode_errors
+
+    bx0, by0, bx1, by1 = box = tile.box(buffer)
+    xs, ys, zs, parts = [], [], [], []
+    header, names = None, None
+    decoded = read = 0
+    for f in files:
+        seen = 0
+        folder = (splits or {}).get(f.path)
+        try:
+            with (laspy.CopcReader.open(f.path) if f.copc else laspy.open(f.path)) as reader:
+                hdr = reader.header
+                file_names = [n for n in hdr.point_format.dimension_names if n not in ("X", "Y", "Z")]
+                if header is None:
+                    header = _without_copc_records(hdr) if f.copc else hdr
+                names = file_names if names is None else [n for n in names if n in file_names]
+                keep_names = file_names if dims is None else [n for n in file_names if n in dims]
+                if f.copc:  # only the octree nodes that reach the box are decoded
+                    chunks = [reader.query(bounds=laspy.Bounds(mins=np.array([bx0, by0]), maxs=np.array([bx1, by1])))]
+                elif folder is not None:
+                    record, n = _split_record(reader, Path(folder), box)
+                    chunks, read = [record], read + n
+                else:
+                    chunks = reader.chunk_iterator(chunk_points)
+                for chunk in chunks:
+                    seen += len(chunk)
+                    x = np.asarray(chunk.x)
+                    y = np.asarray(chunk.y)
+                    m = (x >= bx0) & (x < bx1) & (y >= by0) & (y < by1)
+                    if not m.any():
+                        continue
+                    xs.append(x[m])
+                    ys.append(y[m])
+                    zs.append(np.asarray(chunk.z)[m])
+                    parts.append({n: np.asarray(chunk[n])[m] for n in keep_names})
+        except _decode_errors() as exc:
+            raise DataError(f"input {f.path!r} is truncated or corrupt after {seen} points "
+                            f"({' '.join(str(exc).split())[:120]}); repair or re-download it") from None
+        if folder is not None:
+            continue
+        decoded += seen
+        read += seen
+        if not f.copc and seen != f.count:
+            raise DataError(f"input {f.path!r} is truncated: the header promises {f.count} points, the file holds "
+                            f"{seen}; re-download or re-export it")
+    keep = [n for n in (names or []) if dims is None or n in dims]
+    cat = (lambda arrs: np.concatenate(arrs)) if xs else (lambda arrs: np.empty(0))
+    fields = {n: np.concatenate([p[n] for p in parts]) for n in keep} if parts else {}
+    pc = PointCloud(x=cat(xs), y=cat(ys), z=cat(zs), fields=fields, source=f"tile {tile.name}", header=header)
+    _apply_crs(pc, crs, header)
+    core = (pc.x >= tile.x0) & (pc.x < tile.x1) & (pc.y >= tile.y0) & (pc.y < tile.y1)
+    return pc, core, decoded, read
