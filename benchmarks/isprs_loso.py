@@ -47,7 +47,8 @@ STEPS = {"refill_gaps": "gap refill",
          "cell_per_spacing": "filter cell from the point spacing"}
 OFF = {**PUBLISHED, "cell_per_spacing": None}  # each step's 'off' value
 FIXED_K = (0.08, 0.05, 0.12, 0.18)  # the slope_k values that are not derived (for the ablation of the derived k)
-FIXED = {"filter_cell_m": 2.0, "max_filter_size_m": 50.0, "slope_factor": 1.0, "low_outlier_m": 2.0}
+FIXED = {"filter_cell_m": 2.0, "max_filter_size_m": 50.0, "slope_factor": 1.0, "low_outlier_m": 2.0,
+         "max_gap_m": 50.0}  # max_gap_m: for tiles to decide holes as the whole does (#81), not chosen on results
 MIN_GAIN_POINTS = 0.1  # a step that gains less than this in the LOSO mean goes (#80)
 SWEEPS = 3  # coordinate descent: at most this many passes over the constants
 # the choices that interact (a rule and the constants it trades against) are searched in full;
@@ -121,7 +122,7 @@ def _error(job) -> float:
         n=c["min_height_n_m"], ground_threshold=c["ground_threshold_m"], slope_factor=FIXED["slope_factor"],
         low_outlier=FIXED["low_outlier_m"], refine=refine != "none",
         refill_gaps=c["refill_gaps"], refine_cell=cell if refine == "filter" else None, min_refine_cell=1.0,
-        refine_per_spacing=c["refine_per_spacing"]))
+        refine_per_spacing=c["refine_per_spacing"], max_gap=FIXED["max_gap_m"]))
     return ground_errors(truth, gr.ground)["total_pct"]
 
 

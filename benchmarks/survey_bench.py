@@ -14,6 +14,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -50,6 +51,38 @@ def survey_files(n: int = 10, density_ppm2: float = 12.0) -> list[Path]:
         return list(pool.map(make, range(n)))
 
 
+def merged_file(files: list[Path]) -> Path:
+    """The survey's files as one LAZ (cached), written a chunk at a time: the reference run."""
+    import laspy
+
+    path = CACHE / f"merged_{len(files):02d}.laz"
+    if path.exists():
+        return path
+    part = path.with_suffix(".part.laz")
+    with laspy.open(files[0]) as first:
+        header = first.header
+    with laspy.open(part, mode="w", header=laspy.LasHeader(point_format=header.point_format,
+                                                           version=header.version)) as out:
+        out.header.scales, out.header.offsets = header.scales, header.offsets
+        for f in files:
+            with laspy.open(f) as r:
+                for chunk in r.chunk_iterator(1_000_000):
+                    out.write_points(chunk)
+    part.rename(path)
+    return path
+
+
+def run_whole_cli(path: Path, out: Path) -> dict:
+    """One plain run over the merged file, in a fresh process (its peak is its own)."""
+    out.mkdir(parents=True, exist_ok=True)
+    cmd = [*TOOLBOX, "run", "dtm", str(path), "-o", str(out / "dtm.tif"), "--json", "--quiet", "--overwrite"]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    if r.returncode != 0:
+        raise RuntimeError(f"whole run failed: {r.stderr.strip()[-500:]}")
+    return {"seconds": time.perf_counter() - t0}
+
+
 def run_survey_cli(files: list[Path], out: Path, workers: int | None = None, scheduler: str | None = None) -> dict:
     cmd = [*TOOLBOX, "run", "dtm", *map(str, files), "-o", str(out), "--tile-size-m", str(TILE_M),
            "--json", "--quiet", "--overwrite"]
@@ -60,6 +93,9 @@ def run_survey_cli(files: list[Path], out: Path, workers: int | None = None, sch
     rep = json.loads(r.stdout)
     tiles = json.loads((out / "survey.json").read_text())["tiles"].values()
     rep["max_tile_points"] = max(t.get("stats", {}).get("n_points", 0) for t in tiles)
+    stats = [t.get("stats", {}) for t in tiles]
+    rep["decoded_points"] = rep["execution"]["split"]["n_decoded_points"] + sum(t.get("n_decoded_points", 0) for t in stats)
+    rep["read_per_box_point"] = sum(t.get("n_read_points", 0) for t in stats) / max(1, sum(t.get("n_points", 0) for t in stats))
     return rep
 
 
@@ -69,22 +105,30 @@ def bench_survey(tmp: Path, quick: bool = False) -> list[dict]:
     rows = []
     print("\nsurvey runs: dtm over 640 m terrain files (~5 M points each), 320 m tiles, buffer as declared; "
           "peak RSS of the driver and the largest worker (MB); Mpt/s = survey points / wall seconds")
-    print(f"{'case':44s} {'points':>11s} {'tiles':>5s} {'tile+buf pts':>12s} {'seconds':>8s} {'Mpt/s':>6s} "
-          f"{'driver MB':>9s} {'worker MB':>9s}")
+    print("  whole s: one plain run over the survey merged into one file, in the same bench run; ratio = survey / "
+          "whole; decoded = points decoded from LAZ / survey points; read = records read / points in tiles' boxes")
+    print(f"{'case':40s} {'points':>11s} {'tiles':>5s} {'tile+buf pts':>12s} {'seconds':>8s} {'whole s':>7s} "
+          f"{'ratio':>5s} {'Mpt/s':>6s} {'decoded':>7s} {'read':>5s} {'driver MB':>9s} {'worker MB':>9s}")
 
-    def row(case, rep):
+    def row(case, rep, whole=None):
         ex, n = rep["execution"], rep["survey"]["n_points"]
         secs = rep["timings_s"]["total"]
         r = {"case": case, "points": n, "tiles": rep["n_tiles"], "max_tile_points": rep["max_tile_points"],
              "seconds": secs, "mpts_per_s": n / secs / 1e6, "driver_peak_rss_mb": ex["driver_peak_rss_mb"],
              "worker_peak_rss_mb": max(ex["worker_peak_rss_mb"].values()),
-             "workers_seen": len(ex["worker_peak_rss_mb"])}
-        print(f"{case:44s} {n:11,d} {r['tiles']:5d} {r['max_tile_points']:12,d} {secs:8.1f} {r['mpts_per_s']:6.2f} "
+             "workers_seen": len(ex["worker_peak_rss_mb"]), "decoded_per_point": rep["decoded_points"] / n,
+             "read_per_box_point": rep["read_per_box_point"],
+             "whole_seconds": whole["seconds"] if whole else None,
+             "ratio_to_whole": secs / whole["seconds"] if whole else None}
+        w = f"{whole['seconds']:7.1f} {r['ratio_to_whole']:5.2f}" if whole else f"{'':7s} {'':5s}"
+        print(f"{case:40s} {n:11,d} {r['tiles']:5d} {r['max_tile_points']:12,d} {secs:8.1f} {w} "
+              f"{r['mpts_per_s']:6.2f} {r['decoded_per_point']:7.2f} {r['read_per_box_point']:5.2f} "
               f"{r['driver_peak_rss_mb']:9.0f} {r['worker_peak_rss_mb']:9.0f}", flush=True)
         rows.append(r)
 
     for k in sizes:
-        row(f"survey {k:2d}x, 2 local workers", run_survey_cli(files[:k], tmp / f"survey_{k}", workers=2))
+        whole = run_whole_cli(merged_file(files[:k]), tmp / f"whole_{k}")
+        row(f"survey {k:2d}x, 2 local workers", run_survey_cli(files[:k], tmp / f"survey_{k}", workers=2), whole)
     k = 3
     row(f"survey {k:2d}x, 1 local worker", run_survey_cli(files[:k], tmp / "survey_w1", workers=1))
     try:

@@ -263,6 +263,14 @@ class Algorithm:
     #: or a function of the validated parameters. None: no declared need (the user gives
     #: ``--buffer-m``; 0 otherwise).
     tile_buffer_m: float | Callable[[Mapping[str, Any]], float] | None = None
+    #: Survey runs: values an algorithm takes from its whole input (a point spacing, a density),
+    #: computed once for the survey so that every tile runs with the value one run over the whole
+    #: would take. ``survey_summary(points, core_box, values) -> dict`` gives one tile's share
+    #: (counts of its core, from its points and buffer); the host sums them over the tiles, and
+    #: ``survey_values(sums, values, horizontal_unit_m) -> dict`` turns the sums into parameter
+    #: values that every tile gets (the report's ``survey_values``).
+    survey_summary: Callable[..., Mapping[str, Any]] | None = None
+    survey_values: Callable[..., Mapping[str, Any]] | None = None
     #: Peak memory of a run per input point (bytes), to refuse before reading a file this machine
     #: cannot hold (``toolbox.memory.check_fits``). None: the host's default.
     bytes_per_point: int | None = None

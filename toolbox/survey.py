@@ -376,6 +376,15 @@ def cut_layer(gdf, tile: Tile):
 # --------------------------------------------------------------------------------------------
 
 def _peak_rss_mb() -> float:
+    """This process's own peak resident memory. VmHWM, not ru_maxrss: ru_maxrss survives fork
+    and exec, so a run started by a process that once held 9 GB reported 9 GB itself."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return round(int(line.split()[1]) / 1024.0, 1)  # kB
+    except (OSError, ValueError, IndexError):
+        pass
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)  # KiB on Linux
 
 
@@ -767,6 +776,7 @@ class SurveyPlan:
     buffer_m: float  # used
     buffer_declared_m: float | None
     splits: list  # plain files to split before the tiles run (``split_points`` tasks)
+    summaries: list  # tiles whose ``Algorithm.survey_summary`` gives the survey's values (``run_summary`` tasks)
 
 
 def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any] | None, *, tile_size_m: float,
@@ -853,12 +863,23 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
     for t in todo:
         box = t.box(buffer_used_m / hu)
         tasks.append({**base_task, "name": t.name, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
-    splits = plan_splits(catalog, tasks, tile_dir / CHUNK_DIR, chunk_cell_size(tile_size_m / hu, buffer_used_m / hu))
+    summaries = []
+    if alg.survey_summary is not None and tasks and "survey_values" not in state:
+        # every tile's share, the finished ones' too: the values must be those of the whole survey
+        for t in tiles:
+            box = t.box(buffer_used_m / hu)
+            summaries.append({**base_task, "name": f"summary {t.name}", "tile": asdict(t),
+                              "files": [asdict(f) for f in catalog.files_in(box)]})
+    elif state.get("survey_values"):
+        for task in tasks:
+            task["params"] = {**task["params"], **state["survey_values"]}
+    splits = plan_splits(catalog, tasks + summaries, tile_dir / CHUNK_DIR,
+                         chunk_cell_size(tile_size_m / hu, buffer_used_m / hu))
     if skipped:
         log.info("%d of %d tiles were done by an earlier run; skipping them", len(skipped), len(tiles))
 
     return SurveyPlan(alg, values, crs, out, wanted, paths, catalog, tiles, skipped, tasks, state, manifest_path,
-                      tile_size_m, buffer_used_m, declared, splits)
+                      tile_size_m, buffer_used_m, declared, splits, summaries)
 
 
 def plan_splits(catalog: Catalog, tasks: list[dict], folder: Path, cell: float) -> list[dict]:
@@ -943,6 +964,8 @@ def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=No
     t0 = time.perf_counter()
     split = _split_files(plan, workers, scheduler)
     t_split = time.perf_counter() - t0
+    _survey_values(plan, workers, scheduler)
+    t_values = time.perf_counter() - t0 - t_split
     cluster = None
     n_workers = None
     if tasks:
@@ -955,7 +978,57 @@ def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=No
     bar.close()
 
     return {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
-            "worker_peak_rss_mb": worker_peaks, "split": {**split, "seconds": round(t_split, 3)}}
+            "worker_peak_rss_mb": worker_peaks, "split": {**split, "seconds": round(t_split, 3)},
+            "survey_values_s": round(t_values, 3)}
+
+
+def _survey_values(plan: SurveyPlan, workers: int | None, scheduler) -> None:
+    """Phase two: the algorithm's values from the whole survey (``Algorithm.survey_summary`` of
+    every tile, summed, through ``survey_values``), given to every tile and kept in the manifest.
+    If a tile's summary fails (its data), the tiles keep their own values: that tile fails too,
+    and nothing is merged."""
+    if not plan.summaries:
+        return
+    results: list[dict] = []
+    if scheduler is not None:
+        _run_dask(plan.summaries, scheduler, results.append, fn=run_summary)
+    else:
+        _run_local(plan.summaries, max(1, min(workers or os.cpu_count() or 1, len(plan.summaries))), results.append,
+                   fn=run_summary)
+    if any(r.get("status") != "done" for r in results) or len(results) != len(plan.summaries):
+        log.warning("the survey's %s values could not be computed (a tile's data failed); each tile takes its own",
+                    plan.alg.id)
+        return
+    sums: dict = {}
+    for r in sorted(results, key=lambda r: r["tile"]):  # integers: the order does not matter, but keep one
+        for k, v in r["sums"].items():
+            sums[k] = sums.get(k, 0) + v
+    values = dict(plan.alg.survey_values(sums, plan.values, plan.catalog.horizontal_unit_m)) if sums else {}
+    plan.state["survey_values"] = values
+    plan.state["survey_sums"] = sums
+    _write_json_atomic(plan.manifest_path, plan.state)
+    for task in plan.tasks:
+        task["params"] = {**task["params"], **values}
+
+
+def run_summary(task: Mapping[str, Any]) -> dict:
+    """One tile's ``Algorithm.survey_summary`` (its core's share of the survey's values); never
+    raises."""
+    name = task["name"]
+    try:
+        progress.set_quiet(True)
+        from .io.points import parse_crs
+        from .registry import rediscover
+
+        alg = rediscover(task.get("entry_points")).get(task["algorithm"])
+        tile = Tile(**task["tile"])
+        crs = parse_crs(task["crs"]) if task.get("crs") else None
+        pc, core, _, _ = read_tile([SurveyFile(**f) for f in task["files"]], tile, task["buffer"], crs=crs,
+                                   dims=task.get("dims"), splits=task.get("splits"))
+        sums = alg.survey_summary(pc, (tile.x0, tile.y0, tile.x1, tile.y1), dict(task["params"]))
+        return {"tile": name, "status": "done", "sums": dict(sums)}
+    except Exception as exc:  # its tile fails the same way, and says so
+        return {"tile": name, "status": "failed", "error": f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"}
 
 
 def _split_files(plan: SurveyPlan, workers: int | None, scheduler) -> dict:
@@ -1018,6 +1091,7 @@ def survey_report(plan: SurveyPlan, execution: dict, failed: list, written: dict
                    "crs": _crs_name(catalog.crs), "crs_given": crs if crs is None or isinstance(crs, str) else
                    _crs_name(crs), "tile_size_m": plan.tile_size_m, "buffer_m": plan.buffer_m,
                    "buffer_declared_m": plan.buffer_declared_m},
+        "survey_values": state.get("survey_values"),
         "n_tiles": len(tiles), "n_done": sum(r.get("status") in ("done", "empty") for r in recs),
         "n_skipped": len(plan.skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),
         "failed": failed, "outputs": written, "manifest": str(plan.manifest_path),

@@ -107,12 +107,24 @@ def low_outliers(grid: Grid, z, flat_index, zmin, threshold: float):
     return out
 
 
-def footprint(occupied: np.ndarray, radius_cells: int) -> np.ndarray:
+def footprint(occupied: np.ndarray, radius_cells: int, max_hole_cells: int | None = None) -> np.ndarray:
     """Cells inside the data's footprint: the occupied cells closed over gaps of up to about
-    2·``radius_cells`` and with enclosed holes (buildings, water) filled."""
+    2·``radius_cells`` and with enclosed holes (water, shadows: no return) filled, those of at most
+    ``max_hole_cells`` across in rows and columns when given. A bounded hole is decided from the
+    cells around it alone, so a tile whose buffer is wider than the hole decides it as the whole
+    survey does; an unbounded one (a lake) is decided by data anywhere."""
     pad = max(int(radius_cells), 1)
-    closed = ndimage.binary_closing(np.pad(occupied, pad), iterations=pad)[pad:-pad, pad:-pad]
-    return ndimage.binary_fill_holes(closed | occupied)
+    closed = ndimage.binary_closing(np.pad(occupied, pad), iterations=pad)[pad:-pad, pad:-pad] | occupied
+    if max_hole_cells is None:
+        return ndimage.binary_fill_holes(closed)
+    lab, n = ndimage.label(~closed)
+    keep = np.zeros(n + 1, bool)
+    rows, cols = closed.shape
+    for i, sl in enumerate(ndimage.find_objects(lab), start=1):
+        r, c = sl
+        inner = r.start > 0 and c.start > 0 and r.stop < rows and c.stop < cols  # touching the edge: outside
+        keep[i] = inner and r.stop - r.start <= max_hole_cells and c.stop - c.start <= max_hole_cells
+    return closed | keep[lab]
 
 
 def fill_holes(surface: np.ndarray, known: np.ndarray | None = None, domain: np.ndarray | None = None,
@@ -265,9 +277,40 @@ class GroundResult:
     point_spacing: float = float("nan")  # mean point spacing over the footprint (cloud's units)
 
 
-def mean_spacing(n_points: int, domain: np.ndarray, cell: float) -> float:
+def mean_spacing(n_points: int, n_footprint_cells: int, cell: float) -> float:
     """Mean distance between points: sqrt(footprint area / points)."""
-    return float(np.sqrt(max(int(domain.sum()), 1) * cell * cell / max(n_points, 1)))
+    return float(np.sqrt(max(int(n_footprint_cells), 1) * cell * cell / max(int(n_points), 1)))
+
+
+def lowest_points(x, y, z, s: "GroundSettings", accel=None):
+    """Step 1 of ``ground_filter``: the filter grid, the lowest point per cell once the low
+    outliers are set aside, each point's cell, and the outliers."""
+    grid = Grid.around(x, y, s.cell)
+    zmin, flat = accel.minimum_surface(grid, x, y, z) if accel is not None else minimum_surface(grid, x, y, z)
+    noise = low_outliers(grid, z, flat, zmin, s.low_outlier)
+    if noise.any():
+        zmin = minimum_surface_without(grid, zmin, flat, z, noise)
+    return grid, zmin, flat, noise
+
+
+def data_footprint(occupied: np.ndarray, s: "GroundSettings") -> np.ndarray:
+    """The filter grid's cells inside the data (closed over 3 cells, holes up to ``s.max_gap``)."""
+    return footprint(occupied, 3, None if s.max_gap is None else int(np.floor(s.max_gap / s.cell)))
+
+
+def spacing_counts(x, y, z, s: "GroundSettings", core_box) -> tuple[int, int]:
+    """The points and the footprint cells (by their centres) inside ``core_box`` (x0, y0, x1, y1,
+    half-open), from points that reach beyond it by the footprint's reach: summed over the tiles
+    of a survey they are the counts ``ground_filter`` takes the point spacing from over the whole."""
+    x0, y0, x1, y1 = core_box
+    grid, zmin, _, _ = lowest_points(x, y, z, s)
+    domain = data_footprint(np.isfinite(zmin), s)
+    cx, cy = grid.centres()
+    in_x = (cx >= x0) & (cx < x1)
+    in_y = (cy >= y0) & (cy < y1)
+    n_cells = int(domain[np.ix_(in_y, in_x)].sum())
+    n_points = int(((x >= x0) & (x < x1) & (y >= y0) & (y < y1)).sum())
+    return n_points, n_cells
 
 
 def refine_cell_size(spacing: float, filter_cell: float, smallest: float, per_spacing: float = 1.25) -> float:
@@ -301,6 +344,7 @@ class GroundSettings:
     refine_cell: float | None = None  # the last refinement's cell (None: from the point spacing)
     min_refine_cell: float = 0.0
     refine_per_spacing: float = 1.25
+    max_gap: float | None = None  # widest hole without returns inside the footprint (None: any enclosed one)
 
 
 def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult:
@@ -324,13 +368,9 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
     """
     s = settings
     cell = s.cell
-    grid = Grid.around(x, y, cell)
-    zmin, flat = accel.minimum_surface(grid, x, y, z) if accel is not None else minimum_surface(grid, x, y, z)
-    noise = low_outliers(grid, z, flat, zmin, s.low_outlier)
-    if noise.any():
-        zmin = minimum_surface_without(grid, zmin, flat, z, noise)
+    grid, zmin, flat, noise = lowest_points(x, y, z, s, accel)
     occupied = np.isfinite(zmin)
-    domain = footprint(occupied, 3)  # interpolate inside the survey only (see fill_holes)
+    domain = data_footprint(occupied, s)  # interpolate inside the survey only (see fill_holes)
     filled = fill_holes(zmin, occupied, domain)
     gaps = domain & ~occupied
     for again in range(2 if s.refill_gaps and gaps.any() else 1):
@@ -343,7 +383,7 @@ def ground_filter(x, y, z, settings: GroundSettings, accel=None) -> GroundResult
         if not keep.any():
             keep = occupied
         provisional = fill_holes(np.where(keep, zmin, np.nan), keep, domain)
-    spacing = mean_spacing(len(x), domain, cell)
+    spacing = mean_spacing(len(x), int(domain.sum()), cell)
 
     samplers = {}  # numpy: bilinear weights once per grid
 

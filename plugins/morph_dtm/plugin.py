@@ -25,6 +25,9 @@ GROUND_PARAMETERS = [
               minimum=0.0, maximum=10.0),
     Parameter("low_outlier_m", float, 2.0, "points this far below their neighbourhood are noise (class 7)",
               unit="m", minimum=0.1, maximum=100.0),
+    Parameter("max_gap_m", float, 50.0, "widest area without returns (water, a shadow) that is interpolated; "
+              "a wider one is left without ground (nodata in the DTM), and a tile in a survey needs a buffer this "
+              "wide to see it whole", unit="m", minimum=0.0, maximum=1000.0),
     Parameter("refine_cell_m", float, None, "cell of the last refinement surface (a plane per 3x3 cells through "
               "the ground points); auto: 1.25 x the mean point spacing, between 1 m and filter_cell_m "
               "(reported as refine_cell_m_used)", unit="m", minimum=0.1, maximum=50.0, allow_auto=True),
@@ -34,19 +37,49 @@ MIN_AUTO_REFINE_CELL_M = 1.0  # finer grids cost memory and time on dense tiles 
 
 def _ground(pc, p, accel=None):
     """Run the ground filter with the parameters converted to the cloud's units."""
-    from .core import Grid, GroundSettings, ground_filter
+    from .core import Grid, ground_filter
 
     pc.require_points("the ground filter", 10)
+    _check_grid(pc, p["filter_cell_m"] / pc.horizontal_unit_m, "filter_cell_m")
+    return ground_filter(pc.x, pc.y, pc.z, _ground_settings(pc, p), accel=accel), Grid
+
+
+def survey_summary(pc, core_box, p) -> dict:
+    """Survey runs: this tile's share of the counts that the auto refine_cell_m comes from (the
+    point spacing over the footprint), so that every tile takes the survey's value, not its own."""
+    from .core import spacing_counts
+
+    if p["ground"] == "file" or p["refine_cell_m"] is not None or len(pc) == 0:
+        return {}
+    n_points, n_cells = spacing_counts(pc.x, pc.y, pc.z, _ground_settings(pc, p), core_box)
+    return {"n_points": n_points, "n_footprint_cells": n_cells}
+
+
+def survey_values(sums, p, horizontal_unit_m: float) -> dict:
+    """The survey's refine_cell_m, from the tiles' ``survey_summary`` summed: what one run over
+    the whole survey would choose."""
+    from .core import GroundSettings, mean_spacing, refine_cell_size
+
+    if not sums.get("n_points"):
+        return {}
+    hu = horizontal_unit_m
+    cell = p["filter_cell_m"] / hu
+    spacing = mean_spacing(sums["n_points"], sums["n_footprint_cells"], cell)
+    per = GroundSettings.__dataclass_fields__["refine_per_spacing"].default
+    return {"refine_cell_m": refine_cell_size(spacing, cell, MIN_AUTO_REFINE_CELL_M / hu, per) * hu}
+
+
+def _ground_settings(pc, p):
+    from .core import GroundSettings
+
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     cell = p["filter_cell_m"] / hu
-    _check_grid(pc, cell, "filter_cell_m")
-    settings = GroundSettings(
+    return GroundSettings(
         cell=cell, max_size=p["max_filter_size_m"] / hu,
         k=p["slope_k"] * hu / vu, n=p["min_height_n_m"] / vu, ground_threshold=p["ground_threshold_m"] / vu,
         slope_factor=p["slope_factor"], low_outlier=p["low_outlier_m"] / vu,
         refine_cell=None if p["refine_cell_m"] is None else p["refine_cell_m"] / hu,
-        min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu)
-    return ground_filter(pc.x, pc.y, pc.z, settings, accel=accel), Grid
+        min_refine_cell=MIN_AUTO_REFINE_CELL_M / hu, max_gap=p["max_gap_m"] / hu)
 
 
 BYTES_PER_CELL = 320  # the DTM fit holds about 40 float64 grids at once
@@ -100,15 +133,16 @@ def _check_grids(pc, params, caller=""):
                     "refine_cell_m", caller)
 
 
-def _footprint(grid, x, y, radius_cells):
-    """Cells inside the data's footprint (holes of buildings and water included)."""
+def _footprint(grid, x, y, radius_cells, max_hole_cells=None):
+    """Cells inside the data's footprint (holes without returns of at most ``max_hole_cells``
+    included)."""
     import numpy as np
 
     from .core import footprint
 
     occ = np.zeros(grid.rows * grid.cols, bool)
     occ[grid.flat_index(x, y)] = True
-    return footprint(occ.reshape(grid.rows, grid.cols), radius_cells)
+    return footprint(occ.reshape(grid.rows, grid.cols), radius_cells, max_hole_cells)
 
 
 KERNEL_MIN_POINTS = 300_000  # below this the numpy passes are as fast as the kernels
@@ -152,7 +186,7 @@ def _accel(ctx, n_points: int):
     return kernels.TaichiAccel(ctx.taichi())
 
 
-def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
+def _dtm_raster(pc, ground_mask, resolution_m, max_gap_m, accel=None):
     import numpy as np
     from affine import Affine
 
@@ -166,7 +200,8 @@ def _dtm_raster(pc, ground_mask, resolution_m, accel=None):
     g = ground_mask
     if g.sum() < 3:
         raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
-    inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))))
+    inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))),
+                        int(np.floor(max_gap_m / resolution_m)))
     dtm, _ = dtm_from_ground(grid, pc.x, pc.y, pc.z, where=g, moments=accel.moments if accel is not None else None,
                              domain=inside, fill_outside=False)  # outside the footprint is nodata
     dtm = np.where(inside, dtm, np.nan).astype(np.float32)
@@ -214,7 +249,7 @@ def _run_dtm(inputs, params, ctx):
     t1 = time.perf_counter()
     # ground 2 and noise 7 where the filter says so; a former 2 it does not keep is 1
     classified = pc.with_fields(classification=pc.classes_with([(2, ground), (7, noise)], released=(2,)))
-    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], accel)
+    dtm, _ = _dtm_raster(pc, ground, params["resolution_m"], params["max_gap_m"], accel)
     t2 = time.perf_counter()
     out = {"dtm": dtm, "classified": classified}
     if ctx.wants("preview"):
@@ -281,7 +316,7 @@ def _run_classify(inputs, params, ctx):
     _check_grids(pc, params, ctx.caller)
     accel = _accel(ctx, len(pc))
     ground, noise, filter_stats = _ground_and_noise(pc, params, accel)
-    dtm, grid = _dtm_raster(pc, ground, params["resolution_m"], accel)
+    dtm, grid = _dtm_raster(pc, ground, params["resolution_m"], params["max_gap_m"], accel)
     surface = np.nan_to_num(dtm.data.astype(np.float64), nan=float(np.nanmin(dtm.data)))
     h = pc.z - bilinear(grid, surface, pc.x, pc.y)
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
@@ -311,10 +346,12 @@ def _run_classify(inputs, params, ctx):
 
 
 def ground_buffer_m(p) -> float:
-    """Survey runs: the points around a tile that its ground needs (the largest opening window
-    reaches max_filter_size_m; the footprint, the harmonic fill's rim and the 3x3 refinement
-    planes a few filter cells more); none when the ground is the file's own."""
-    return 0.0 if p.get("ground") == "file" else p["max_filter_size_m"] + 5 * p["filter_cell_m"]
+    """Survey runs: the points around a tile that its ground and DTM need: the largest opening
+    window reaches max_filter_size_m (not with the file's own ground), a hole without returns is
+    decided from the cells around it (max_gap_m), and the footprint's closing, the harmonic fill's
+    rim and the 3x3 refinement planes reach a few filter cells more."""
+    widest = max(0.0 if p.get("ground") == "file" else p["max_filter_size_m"], p["max_gap_m"])
+    return widest + 5 * p["filter_cell_m"]
 
 
 @toolbox.hookimpl
@@ -336,7 +373,7 @@ def toolbox_algorithms():
                 "harmonic interpolation. Writes the DTM GeoTIFF and the LAZ with ground (2) and noise (7). "
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
-            tile_buffer_m=ground_buffer_m,
+            tile_buffer_m=ground_buffer_m, survey_summary=survey_summary, survey_values=survey_values,
             parameters=[resolution,
                         Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or "
                                   "the file's own class 2 (then only the DTM is made)", choices=("filter", "file")),
@@ -386,6 +423,7 @@ def toolbox_algorithms():
             reference=REFERENCE,
             # the ground's need, and a building's whole roof (its planar set) seen from either side
             tile_buffer_m=lambda p: max(ground_buffer_m(p), 50.0),
+            survey_summary=survey_summary, survey_values=survey_values,
             parameters=[
                 resolution,
                 Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or the "
