@@ -217,3 +217,43 @@ def test_dtm_survey_equals_the_whole_run_on_real_files(real_splits, tmp_path, re
     assert rep["n_failed"] == 0 and rep["n_tiles"] >= 2
     over, worst, only = _dtm_diff(d / "dtm.tif", tmp_path / "out" / "dtm.tif")
     assert over == 0 and only == 0, (over, worst, only)
+
+
+def test_tophat_survey_gives_the_whole_runs_cells_once(real_splits, tmp_path):
+    """Points the algorithm makes (cell centroids) are kept by the tile whose core holds them: every
+    centroid of the whole run once, within the LAS coordinates' 1 mm."""
+    from scipy.spatial import cKDTree
+
+    d = real_splits("ahn4_corridor/07CZ2_14.laz")
+    src = shared_file("ahn4_corridor/07CZ2_14.laz")
+    toolbox.run("tophat", src, tmp_path / "whole.laz")
+    rep = run_survey("tophat", [d / "split"], tmp_path / "out", tile_size_m=100, workers=2)
+    assert rep["n_failed"] == 0 and rep["survey"]["buffer_m"] == rep["survey"]["buffer_declared_m"] == 1.5
+    whole = laspy.read(tmp_path / "whole.laz")
+    parts = [laspy.read(p) for p in sorted((tmp_path / "out" / "points").glob("*.laz"))]
+    a = np.c_[whole.x, whole.y, whole.z]
+    b = np.concatenate([np.c_[p.x, p.y, p.z] for p in parts])
+    assert len(a) == len(b) > 1000
+    dist, j = cKDTree(b).query(a)
+    assert dist.max() <= 0.0018 and len(np.unique(j)) == len(b)  # one to one, within a quantum per axis
+
+
+def test_building_edges_survey_gives_the_whole_runs_outlines_and_tiles_without_buildings_are_empty(real_splits,
+                                                                                                   tmp_path):
+    import geopandas as gpd
+
+    d = real_splits("pdal_autzen/autzen_trim.las")
+    src = shared_file("pdal_autzen/autzen_trim.las")
+    toolbox.run("building-edges", src, tmp_path / "whole.gpkg")
+    rep = run_survey("building-edges", [d / "split"], tmp_path / "out", tile_size_m=100, workers=2)
+    assert rep["n_failed"] == 0 and rep["survey"]["buffer_m"] == 60.0
+    a = gpd.read_file(tmp_path / "whole.gpkg", layer="building_outlines")
+    b = gpd.read_file(tmp_path / "out" / "outlines.gpkg", layer="building_outlines")
+    assert len(a) == len(b) == 20
+    assert abs(a.area.sum() - b.area.sum()) < 1e-6 * a.area.sum()
+    for g in a.geometry:  # each outline once, the same
+        same = b.geometry[b.geometry.intersects(g)]
+        assert len(same) == 1 and same.iloc[0].symmetric_difference(g).area < 1e-6 * g.area
+    states = json.loads((tmp_path / "out" / "survey.json").read_text())["tiles"].values()
+    empty = [t for t in states if t["status"] == "empty" and "no building points" in t.get("reason", "")]
+    assert empty, "no tile without buildings: the test no longer shows that such a tile is empty, not failed"

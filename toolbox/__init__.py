@@ -10,13 +10,13 @@ Python API (mirrors the command line)::
 from __future__ import annotations
 
 from .algorithm import Algorithm, Input, LayerMerge, Output, Parameter, Result
-from .errors import DataError, PluginError, ToolboxError, UsageError
+from .errors import DataError, NothingFound, PluginError, ToolboxError, UsageError
 from .hookspecs import hookimpl
 
 __version__ = "0.1.0"
 __all__ = [
     "Algorithm", "Input", "LayerMerge", "Output", "Parameter", "Result", "hookimpl",
-    "DataError", "PluginError", "ToolboxError", "UsageError",
+    "DataError", "NothingFound", "PluginError", "ToolboxError", "UsageError",
     "algorithms", "broken_plugins", "run", "run_pipeline",
 ]
 

@@ -20,6 +20,11 @@ class DataError(ToolboxError):
     exit_code = 1
 
 
+class NothingFound(DataError):
+    """The input holds none of what the algorithm looks for (no building, no wire). One run says
+    so and fails; a survey's tile that finds nothing is empty, as a tile without points is."""
+
+
 class PluginError(ToolboxError):
     """A plugin is broken (fails to import, raises in a hook, or clashes with another)."""
 

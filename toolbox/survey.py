@@ -47,7 +47,7 @@ import numpy as np
 
 from . import kernels, progress
 from .algorithm import Algorithm, LayerMerge
-from .errors import DataError, ToolboxError, UsageError
+from .errors import DataError, NothingFound, ToolboxError, UsageError
 from .io.vpc import is_vpc, read_vpc, write_vpc
 from .survey_exec import _run_dask, _run_local
 from .survey_read import chunk_cell_size, read_tile, split_done, split_points
@@ -426,6 +426,9 @@ def run_tile(task: Mapping[str, Any]) -> dict:
         written, layer_types = _write_tile_outputs(alg, result.outputs, task, tile, core)
         return {**base, "status": "done", "stats": stats, "outputs": written, "layer_types": layer_types,
                 "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}
+    except NothingFound as exc:  # a tile without buildings, without ground: as a tile without points
+        return {**base, "status": "empty", "reason": str(exc), "stats": {}, "outputs": {}, "layer_types": {},
+                "peak_rss_mb": _peak_rss_mb(), "seconds": round(time.perf_counter() - t0, 3)}
     except ToolboxError as exc:
         error = str(exc)
     except MemoryError:
@@ -469,7 +472,12 @@ def _write_tile_outputs(alg: Algorithm, outputs: Mapping[str, Any], task, tile: 
             folder = Path(task["outputs"][name])
             folder.mkdir(parents=True, exist_ok=True)
             path = folder / f"{tile.name}.laz"
-            write_points(value.subset(core) if len(value) == len(core) else value, path, overwrite=True)
+            if len(value) == len(core):  # the input's points, with their new classes
+                kept = value.subset(core)
+            else:  # points the algorithm made (cell centroids, fitted points): by where they lie
+                kept = value.subset((value.x >= tile.x0) & (value.x < tile.x1) & (value.y >= tile.y0) &
+                                    (value.y < tile.y1))
+            write_points(kept, path, overwrite=True)
         elif kind == "json":
             path = tile_dir / f"{name}.json"
             from .runner import _json_default

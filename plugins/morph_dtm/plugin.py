@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import toolbox
-from toolbox import Algorithm, DataError, Input, Output, Parameter, UsageError
+from toolbox import Algorithm, DataError, NothingFound, Input, Output, Parameter, UsageError
 
 REFERENCE = ("Mongus & Žalik (2014) IEEE JSTARS 7(1) 340-351; Mongus, Lukač & Žalik (2014) ISPRS J. 93, 145-156; "
              "Mongus & Horvat, gLiDAR, Geodetski vestnik (METHODS.md §2)")
@@ -99,7 +99,7 @@ def _ground_and_noise(pc, params, accel=None):
     if params["ground"] == "file":
         cls0 = pc.classification
         if cls0 is None or not np.any(cls0 == 2):
-            raise DataError(f"input {pc.source!r} has no ground class (2); use ground=filter")
+            raise NothingFound(f"input {pc.source!r} has no ground class (2); use ground=filter")
         return cls0 == 2, cls0 == 7, {}
     gr, _ = _ground(pc, params, accel)
     hu = pc.horizontal_unit_m
@@ -199,7 +199,7 @@ def _dtm_raster(pc, ground_mask, resolution_m, max_gap_m, accel=None):
     grid = Grid.around(pc.x, pc.y, res, pad_cells=0)
     g = ground_mask
     if g.sum() < 3:
-        raise DataError(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
+        raise NothingFound(f"input {pc.source!r}: fewer than 3 ground points were found; check the parameters")
     inside = _footprint(grid, pc.x, pc.y, max(2, int(np.ceil(5.0 / resolution_m))),
                         int(np.floor(max_gap_m / resolution_m)))
     dtm, _ = dtm_from_ground(grid, pc.x, pc.y, pc.z, where=g, moments=accel.moments if accel is not None else None,

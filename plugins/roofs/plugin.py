@@ -4,7 +4,7 @@ lives in ``core`` (pure functions), the voting in ``kernels`` (taichi) and ``ref
 from __future__ import annotations
 
 import toolbox
-from toolbox import Algorithm, DataError, Input, Output, Parameter, UsageError
+from toolbox import Algorithm, DataError, NothingFound, Input, Output, Parameter, UsageError
 
 REFERENCE = ("Borowiec, Hough transform as a tool supporting building roof detection (METHODS.md §3); "
              "Borrmann, Elseberg, Lingemann, Nüchter (2011), The 3D Hough Transform for plane detection in "
@@ -51,7 +51,7 @@ def _roof_points(pc, params, ctx):
         return np.ones(len(pc), bool), "all"
     if source == "classified":
         if cls is None or not np.any(cls == 6):
-            raise DataError(f"input {pc.source!r} has no building class (6); use source=detect or source=all")
+            raise NothingFound(f"input {pc.source!r} has no building class (6); use source=detect or source=all")
         return cls == 6, "classified"
     res = ctx.call("classify", {"points": pc})
     return np.asarray(res.outputs["classified"].classification) == 6, "detect"
@@ -229,7 +229,7 @@ def _run_edges(inputs, params, ctx):
     roof, height, source = _edge_roof_points(pc, params, ctx)
     idx = np.flatnonzero(roof)
     if len(idx) < 3:
-        raise DataError(f"input {pc.source!r}: no building points found (source={source}); check min_height_m or "
+        raise NothingFound(f"input {pc.source!r}: no building points found (source={source}); check min_height_m or "
                         "the classes")
     x, y = pc.x[idx], pc.y[idx]
     west, north, rows, cols = edges.mask_grid(x, y, cell)
@@ -312,7 +312,7 @@ def _edge_roof_points(pc, params, ctx):
         return np.ones(len(pc), bool), height, source
     if source == "classified":
         if cls is None or not np.any(cls == 6):
-            raise DataError(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
+            raise NothingFound(f"input {pc.source!r} has no building class (6); use source=height or source=detect")
         return cls == 6, height, source
     if source == "detect":
         return np.asarray(ctx.call("classify", {"points": pc}).outputs["classified"].classification) == 6, height, source
@@ -349,6 +349,11 @@ def _outline_edges(ctx, pc, edge, transform, cell_size_m: float):
     return lines, my_edges
 
 
+# survey runs: the classify step's ground (the DTM's 60 m) and a building reaching that far beyond
+# the tile's border, whole in the tile that keeps it (an outline or plane by its representative point)
+SURVEY_BUFFER_M = 60.0
+
+
 @toolbox.hookimpl
 def toolbox_algorithms():
     return [Algorithm(
@@ -363,6 +368,7 @@ def toolbox_algorithms():
             "corners square. Layers building_outlines (Polygon: area, height above the terrain, points, "
             "direction) and roof_edges (the Hough lines)."),
         reference=REFERENCE,
+        tile_buffer_m=SURVEY_BUFFER_M,
         parameters=[
             Parameter("source", str, "auto", "building cells from the file's class 6 (classified), from classify "
                       "(detect), from last-return heights (height, the method), or every point (all: a roof-only "
@@ -394,6 +400,7 @@ def toolbox_algorithms():
             "along the lower one is a step line. Writes the planes as PolygonZ (normal, d, slope, aspect, rms, building) and the input with a "
             "plane_id dimension (0: on no plane)."),
         reference=REFERENCE,
+        tile_buffer_m=SURVEY_BUFFER_M,
         parameters=[
             Parameter("source", str, "auto", "where the roof points come from", choices=("auto", "classified",
                                                                                          "detect", "all")),

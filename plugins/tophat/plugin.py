@@ -57,6 +57,8 @@ def toolbox_algorithms():
     return [
         Algorithm(
             id="tophat", title="Top-hat point filter (thin structures)", run=_run_points,
+            # survey runs: the opening's reach on the mask (its cells are on a fixed lattice)
+            tile_buffer_m=lambda p: p["size_cells"] * p["cell_size_m"],
             description=("Binary raster of occupied cells, opening with the structuring element, top-hat = mask - "
                          "opening; in each top-hat cell fewer than max_points_per_cell points are replaced by their "
                          "centroid, denser cells (vegetation) are dropped. Leaves about 2 points per metre of wire."),
