@@ -420,13 +420,3 @@ def test_powerlines_survey_gives_the_conductors_of_one_run_on_the_whole(powerlin
     """Hough tiles on a fixed grid, the surface density measured on fixed cells around each point,
     the tower search on fixed cells: a tile decides as the whole run does."""
     _same_conductors_and_crossings(powerlines_runs["whole"], powerlines_runs["local"])
-
-
-def test_powerlines_survey_on_a_two_worker_dask_cluster_gives_the_same(powerlines_runs, survey, tmp_path):
-    distributed = pytest.importorskip("distributed", reason="dask.distributed is not installed (the [cluster] extra)")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
-        rep = run_survey("powerlines", [survey["split"]], tmp_path / "out", tile_size_m=100,
-                         scheduler=cluster.scheduler_address)
-    assert rep["n_failed"] == 0 and len(rep["execution"]["worker_peak_rss_mb"]) == 2
-    _same_conductors_and_crossings(powerlines_runs["whole"], tmp_path / "out" / "lines.gpkg")

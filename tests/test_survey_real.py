@@ -160,9 +160,9 @@ def test_a_file_larger_than_memory_is_refused_before_reading(topography, tmp_pat
 
 
 # real files split into 2 x 2 delivery files, each at two tile sizes (CRS units: Autzen is in feet)
-REAL_SURVEYS = [("lidR/Topography.laz", 250), ("pdal_autzen/autzen_trim.las", 100),
+REAL_SURVEYS = [("lidR/Topography.laz", 250), ("pdal_autzen/autzen_trim.las", 150),
                 ("pdal_autzen/autzen_trim.las", 250), ("ahn3_amsterdam/ahn_2386_9702.laz", 25),
-                ("ahn3_amsterdam/ahn_2386_9702.laz", 50), ("ahn4_corridor/07CZ2_14.laz", 100),
+                ("ahn3_amsterdam/ahn_2386_9702.laz", 50), ("ahn4_corridor/07CZ2_14.laz", 150),
                 ("ahn4_corridor/07CZ2_14.laz", 250), ("isprs_filtertest/samp11.txt", 100),
                 ("isprs_filtertest/samp11.txt", 250)]
 

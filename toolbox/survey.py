@@ -647,15 +647,20 @@ def _join_pieces(df, rule: LayerMerge):
     if ends:
         pts, dirs = np.asarray(pts), np.asarray(dirs)
         tree = cKDTree(pts)
-        best = {}
+        pairs = []
         for k, (i, _) in enumerate(ends):
-            cands = [m for m in tree.query_ball_point(pts[k], rule.join_tolerance_m) if tiles[ends[m][0]] != tiles[i]
-                     and float(dirs[k] @ dirs[m]) < -0.95]  # the other piece goes on the opposite way
-            if cands:
-                best[k] = min(cands, key=lambda m: float(np.linalg.norm(pts[m] - pts[k])))
-        for k, m in best.items():
-            if best.get(m) == k:
+            for m in tree.query_ball_point(pts[k], rule.join_tolerance_m):
+                # from another tile, the other piece going on the opposite way
+                if m > k and tiles[ends[m][0]] != tiles[i] and float(dirs[k] @ dirs[m]) < -0.95:
+                    pairs.append((float(np.linalg.norm(pts[m] - pts[k])), k, m))
+        # closest first, each end once: lines that coincide in plan (wires stacked over one another
+        # in a 2D layer) meet a tile border at one point, and every piece still finds a partner
+        free = np.ones(len(ends), bool)
+        for _, k, m in sorted(pairs):
+            if free[k] and free[m]:
+                free[k] = free[m] = False
                 partner[ends[k]] = ends[m]
+                partner[ends[m]] = ends[k]
     rows, seen = [], set()
     lengths = np.array([np.hypot(*np.diff(c[:, :2], axis=0).T).sum() for c in coords])
     for start in range(len(coords)):
