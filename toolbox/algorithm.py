@@ -266,7 +266,8 @@ class Algorithm:
     #: Survey runs: values an algorithm takes from its whole input (a point spacing, a density),
     #: computed once for the survey so that every tile runs with the value one run over the whole
     #: would take. ``survey_summary(points, core_box, values) -> dict`` gives one tile's share
-    #: (counts of its core, from its points and buffer); the host sums them over the tiles, and
+    #: (counts of its core, from its points and buffer: x, y, z and the dimensions the input
+    #: declares); the host sums them over the tiles, and
     #: ``survey_values(sums, values, horizontal_unit_m) -> dict`` turns the sums into parameter
     #: values that every tile gets (the report's ``survey_values``).
     survey_summary: Callable[..., Mapping[str, Any]] | None = None

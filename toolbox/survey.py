@@ -49,7 +49,7 @@ from . import kernels, progress
 from .algorithm import Algorithm, LayerMerge
 from .errors import DataError, NothingFound, ToolboxError, UsageError
 from .io.vpc import is_vpc, read_vpc, write_vpc
-from .survey_exec import _run_dask, _run_local
+from .survey_exec import LocalPool, _run_dask, _run_local
 from .survey_read import chunk_cell_size, read_tile, split_done, split_points
 
 log = logging.getLogger(__name__)
@@ -882,7 +882,8 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
         for t in tiles:
             box = t.box(buffer_used_m / hu)
             summaries.append({**base_task, "name": f"summary {t.name}", "tile": asdict(t),
-                              "files": [asdict(f) for f in catalog.files_in(box)]})
+                              "files": [asdict(f) for f in catalog.files_in(box)],
+                              "dims": list(spec.dims or ())})  # x, y, z and what the input declares
     elif state.get("survey_values"):
         for task in tasks:
             task["params"] = {**task["params"], **state["survey_values"]}
@@ -974,20 +975,23 @@ def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=No
         bar.update(1)
 
     _write_json_atomic(manifest_path, state)
-    t0 = time.perf_counter()
-    split = _split_files(plan, workers, scheduler)
-    t_split = time.perf_counter() - t0
-    _survey_values(plan, workers, scheduler)
-    t_values = time.perf_counter() - t0 - t_split
     cluster = None
-    n_workers = None
-    if tasks:
-        if scheduler is not None:
-            cluster = _run_dask(tasks, scheduler, on_result, on_start, fn=run_tile)
-            n_workers = cluster["n_workers"]
-        else:
-            n_workers = max(1, min(workers or os.cpu_count() or 1, len(tasks)))
-            _run_local(tasks, n_workers, on_result, on_start, fn=run_tile)
+    n_workers = max(1, min(workers or os.cpu_count() or 1, max(len(tasks), len(plan.splits), len(plan.summaries))))
+    with LocalPool(n_workers) as pools:  # one pool for the three phases: its workers start once
+        t0 = time.perf_counter()
+        split = _split_files(plan, n_workers, scheduler, pools)
+        t_split = time.perf_counter() - t0
+        _survey_values(plan, n_workers, scheduler, pools)
+        t_values = time.perf_counter() - t0 - t_split
+        if tasks:
+            if scheduler is not None:
+                cluster = _run_dask(tasks, scheduler, on_result, on_start, fn=run_tile)
+                n_workers = cluster["n_workers"]
+            else:
+                n_workers = max(1, min(n_workers, len(tasks)))
+                _run_local(tasks, n_workers, on_result, on_start, fn=run_tile, pools=pools)
+        elif scheduler is None:
+            n_workers = None
     bar.close()
 
     return {"scheduler": cluster["address"] if cluster else None, "workers": n_workers,
@@ -995,7 +999,7 @@ def execute_survey(plan: SurveyPlan, *, workers: int | None = None, scheduler=No
             "survey_values_s": round(t_values, 3)}
 
 
-def _survey_values(plan: SurveyPlan, workers: int | None, scheduler) -> None:
+def _survey_values(plan: SurveyPlan, workers: int, scheduler, pools) -> None:
     """Phase two: the algorithm's values from the whole survey (``Algorithm.survey_summary`` of
     every tile, summed, through ``survey_values``), given to every tile and kept in the manifest.
     If a tile's summary fails (its data), the tiles keep their own values: that tile fails too,
@@ -1006,8 +1010,8 @@ def _survey_values(plan: SurveyPlan, workers: int | None, scheduler) -> None:
     if scheduler is not None:
         _run_dask(plan.summaries, scheduler, results.append, fn=run_summary)
     else:
-        _run_local(plan.summaries, max(1, min(workers or os.cpu_count() or 1, len(plan.summaries))), results.append,
-                   fn=run_summary)
+        _run_local(plan.summaries, max(1, min(workers, len(plan.summaries))), results.append, fn=run_summary,
+                   pools=pools)
     if any(r.get("status") != "done" for r in results) or len(results) != len(plan.summaries):
         log.warning("the survey's %s values could not be computed (a tile's data failed); each tile takes its own",
                     plan.alg.id)
@@ -1044,7 +1048,7 @@ def run_summary(task: Mapping[str, Any]) -> dict:
         return {"tile": name, "status": "failed", "error": f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"}
 
 
-def _split_files(plan: SurveyPlan, workers: int | None, scheduler) -> dict:
+def _split_files(plan: SurveyPlan, workers: int, scheduler, pools) -> dict:
     """Phase one: the plan's plain files split by cell, on the same pool or cluster as the tiles.
     A file that fails to split is read directly by its tiles (which then fail with its reason)."""
     results: list[dict] = []
@@ -1058,8 +1062,7 @@ def _split_files(plan: SurveyPlan, workers: int | None, scheduler) -> dict:
         if scheduler is not None:
             _run_dask(plan.splits, scheduler, on_result, fn=split_points)
         else:
-            _run_local(plan.splits, max(1, min(workers or os.cpu_count() or 1, len(plan.splits))), on_result,
-                       fn=split_points)
+            _run_local(plan.splits, max(1, min(workers, len(plan.splits))), on_result, fn=split_points, pools=pools)
         bar.close()
     failed = {r["file"] for r in results if r.get("status") != "done" and "file" in r}
     failed |= {t["file"]["path"] for t in plan.splits if t["name"] in {r["tile"] for r in results if "file" not in r}}

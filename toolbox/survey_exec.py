@@ -20,24 +20,55 @@ def _task_name(task: Mapping[str, Any]) -> str:
     return task["name"]  # a tile's, or "split FILE"
 
 
-def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None], on_start=None, *, fn) -> None:
-    """Tiles in a process pool, at most ``workers`` at a time. A worker that dies (killed, out of
-    memory) breaks the pool: its tiles are retried on a fresh pool, up to MAX_ATTEMPTS times."""
+class LocalPool:
+    """A process pool kept over a survey's phases (split, summaries, tiles): its workers start, and
+    import the toolbox and the plugins, once. A pool a dead worker broke is replaced."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = None
+
+    def get(self):
+        import concurrent.futures as cf
+        import multiprocessing as mp
+
+        if self._pool is None:
+            # workers start from a clean server process, not forked from the driver: a driver that
+            # has run GDAL (or any library with a thread pool) may hold a lock a forked child waits on
+            if "forkserver" in mp.get_all_start_methods():
+                ctx = mp.get_context("forkserver")
+                ctx.set_forkserver_preload(["toolbox.survey", "toolbox.runner"])
+            else:
+                ctx = mp.get_context("spawn")
+            self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
+        return self._pool
+
+    def discard(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.discard()
+
+
+def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None], on_start=None, *, fn,
+               pools: LocalPool | None = None) -> None:
+    """Tasks in a process pool (``pools``, or one of its own), at most ``workers`` at a time. A
+    worker that dies (killed, out of memory) breaks the pool: its tasks are retried on a fresh
+    pool, up to MAX_ATTEMPTS times."""
     import concurrent.futures as cf
-    import multiprocessing as mp
     from concurrent.futures.process import BrokenProcessPool
 
     queue = list(tasks)
     attempts: dict[str, int] = {}
-    # workers start from a clean server process, not forked from the driver: a driver that has
-    # run GDAL (or any library with a thread pool) may hold a lock a forked child then waits on
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["toolbox.survey", "toolbox.runner"])
-    else:
-        ctx = mp.get_context("spawn")
+    own = pools is None
+    pools = pools or LocalPool(workers)
     while queue:
-        pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        pool = pools.get()
         running: dict = {}
         broken = False
         try:
@@ -72,9 +103,12 @@ def _run_local(tasks: list[dict], workers: int, on_result: Callable[[dict], None
             from .runner import stop_workers
 
             stop_workers(pool, running)
+            pools.discard()
             raise
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+        if broken:
+            pools.discard()
+    if own:
+        pools.discard()
 
 
 def _run_dask(tasks: list[dict], scheduler, on_result: Callable[[dict], None], on_start=None, *, fn) -> dict:
