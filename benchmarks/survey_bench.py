@@ -83,8 +83,9 @@ def run_whole_cli(path: Path, out: Path) -> dict:
     return {"seconds": time.perf_counter() - t0}
 
 
-def run_survey_cli(files: list[Path], out: Path, workers: int | None = None, scheduler: str | None = None) -> dict:
-    cmd = [*TOOLBOX, "run", "dtm", *map(str, files), "-o", str(out), "--tile-size-m", str(TILE_M),
+def run_survey_cli(files: list[Path], out: Path, workers: int | None = None, scheduler: str | None = None,
+                   tile_m: float = TILE_M) -> dict:
+    cmd = [*TOOLBOX, "run", "dtm", *map(str, files), "-o", str(out), "--tile-size-m", str(tile_m),
            "--json", "--quiet", "--overwrite"]
     cmd += ["--scheduler", scheduler] if scheduler else ["--workers", str(workers)]
     r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "ignore"})
@@ -130,6 +131,8 @@ def bench_survey(tmp: Path, quick: bool = False) -> list[dict]:
         whole = run_whole_cli(merged_file(files[:k]), tmp / f"whole_{k}")
         row(f"survey {k:2d}x, 2 local workers", run_survey_cli(files[:k], tmp / f"survey_{k}", workers=2), whole)
     k = 3
+    row(f"survey {k:2d}x, 500 m tiles, 2 workers", run_survey_cli(files[:k], tmp / "survey_500", workers=2, tile_m=500.0),
+        run_whole_cli(merged_file(files[:k]), tmp / "whole_500"))
     row(f"survey {k:2d}x, 1 local worker", run_survey_cli(files[:k], tmp / "survey_w1", workers=1))
     try:
         import distributed
