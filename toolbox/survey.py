@@ -876,17 +876,7 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
     for t in todo:
         box = t.box(buffer_used_m / hu)
         tasks.append({**base_task, "name": t.name, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
-    summaries = []
-    if alg.survey_summary is not None and tasks and "survey_values" not in state:
-        # every tile's share, the finished ones' too: the values must be those of the whole survey
-        for t in tiles:
-            box = t.box(buffer_used_m / hu)
-            summaries.append({**base_task, "name": f"summary {t.name}", "tile": asdict(t),
-                              "files": [asdict(f) for f in catalog.files_in(box)],
-                              "dims": list(spec.dims or ())})  # x, y, z and what the input declares
-    elif state.get("survey_values"):
-        for task in tasks:
-            task["params"] = {**task["params"], **state["survey_values"]}
+    summaries = plan_summaries(alg, catalog, tiles, tasks, state, base_task, buffer_used_m / hu, spec)
     splits = plan_splits(catalog, tasks + summaries, tile_dir / CHUNK_DIR,
                          chunk_cell_size(tile_size_m / hu, buffer_used_m / hu))
     if skipped:
@@ -894,6 +884,24 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
 
     return SurveyPlan(alg, values, crs, out, wanted, paths, catalog, tiles, skipped, tasks, state, manifest_path,
                       tile_size_m, buffer_used_m, declared, splits, summaries)
+
+
+def plan_summaries(alg, catalog: Catalog, tiles, tasks: list[dict], state: dict, base_task: dict, buffer: float,
+                   spec) -> list[dict]:
+    """The ``run_summary`` tasks (one per tile) of an algorithm that takes values from its whole
+    input (``Algorithm.survey_summary``); none when an earlier run of the same survey found them
+    (its values are given to the tasks instead)."""
+    if alg.survey_summary is None or not tasks:
+        return []
+    if "survey_values" in state:
+        for task in tasks:
+            task["params"] = {**task["params"], **(state["survey_values"] or {})}
+        return []
+    # every tile's share, the finished ones' too: the values must be those of the whole survey
+    return [{**base_task, "name": f"summary {t.name}", "tile": asdict(t),
+             "files": [asdict(f) for f in catalog.files_in(t.box(buffer))],
+             "dims": list(spec.dims or ())}  # x, y, z and what the input declares
+            for t in tiles]
 
 
 def plan_splits(catalog: Catalog, tasks: list[dict], folder: Path, cell: float) -> list[dict]:
