@@ -23,6 +23,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("general options")
     g.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     g.add_argument("-q", "--quiet", action="store_true", help="no progress bars, warnings only")
+    g.add_argument("--progress-json", action="store_true",
+                   help="progress as one JSON line per update on stderr (for callers such as the QGIS provider)")
     g.add_argument("--arch", choices=kernels.ARCHES, default=None,
                    help="taichi architecture for kernels (default: $TOOLBOX_ARCH or auto: CUDA if present, else CPU)")
 
@@ -72,6 +74,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the tiles on a dask.distributed cluster, e.g. tcp://10.0.0.5:8786 (default: local processes)")
     _common(sp)
 
+    sp = sub.add_parser("qgis", help="the QGIS plugin: every algorithm in the Processing toolbox")
+    q = sp.add_subparsers(dest="qgis_command", metavar="ACTION", required=True)
+    qi = q.add_parser("install", help="copy the plugin into a QGIS profile and enable it (run again after "
+                                      "installing a toolbox plugin)")
+    qi.add_argument("--profile-dir", default=None, metavar="DIR",
+                    help="the profile folder (the one holding python/plugins/); default: QGIS's default profile")
+    _common(qi)
+    qp = q.add_parser("package", help="the plugin as a zip for QGIS's 'Install from ZIP'")
+    qp.add_argument("-o", "--output", required=True, metavar="ZIP")
+    _common(qp)
+
     sp = sub.add_parser("pipeline", help="run a pipeline file (YAML or JSON)")
     sp.add_argument("file")
     sp.add_argument("--crs", help="set or override the CRS of point inputs")
@@ -101,6 +114,7 @@ def _setup(args) -> None:
     # laspy logs reader failures itself; the host reports them as one line
     logging.getLogger("laspy").setLevel(logging.DEBUG if level == logging.DEBUG else logging.CRITICAL)
     progress.set_quiet(getattr(args, "quiet", False) or getattr(args, "json", False))
+    progress.set_json(getattr(args, "progress_json", False))
     kernels.set_arch(getattr(args, "arch", None))
 
 
@@ -274,7 +288,19 @@ def cmd_pipeline(args) -> int:
     return 0
 
 
-COMMANDS = {"list": cmd_list, "help": cmd_help, "run": cmd_run, "pipeline": cmd_pipeline}
+def cmd_qgis(args) -> int:
+    from . import qgis
+
+    if args.qgis_command == "install":
+        where = qgis.install(args.profile_dir)
+        print(f"installed the QGIS plugin in {where} and enabled it; restart QGIS (Processing > Toolbox > "
+              "Lidar toolbox), or run qgis_process list")
+    else:
+        print(f"wrote {qgis.package(args.output)}; in QGIS: Plugins > Manage and Install Plugins > Install from ZIP")
+    return 0
+
+
+COMMANDS = {"list": cmd_list, "help": cmd_help, "run": cmd_run, "pipeline": cmd_pipeline, "qgis": cmd_qgis}
 
 
 def main(argv=None) -> int:

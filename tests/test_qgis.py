@@ -1,0 +1,106 @@
+"""The QGIS plugin (#78): installed into a temporary profile, listed, described and run through
+QGIS's own ``qgis_process`` (headless), against the command line's outputs."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+
+import pytest
+
+from conftest import TOOLBOX, shared_file
+
+QGIS = shutil.which("qgis_process.bin")  # Debian's qgis_process wrapper passes an option 3.22 rejects
+pytestmark = [pytest.mark.skipif(QGIS is None, reason="QGIS is not installed (apt-get install qgis python3-qgis)"),
+              pytest.mark.xdist_group("qgis")]
+
+
+@pytest.fixture(scope="module")
+def qgis_env(tmp_path_factory):
+    cfg = tmp_path_factory.mktemp("qgis_config")
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "QGIS_CUSTOM_CONFIG_PATH": str(cfg),
+           "XDG_RUNTIME_DIR": str(cfg)}
+    r = subprocess.run([str(TOOLBOX), "qgis", "install", "--profile-dir", str(cfg / "profiles" / "default")],
+                       capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr
+    return env
+
+
+def _qgis(env, *args, timeout=300):
+    return subprocess.run([QGIS, *args], capture_output=True, text=True, env=env, timeout=timeout)
+
+
+def test_every_toolbox_algorithm_is_listed_in_qgis(qgis_env):
+    r = _qgis(qgis_env, "list")
+    assert r.returncode == 0, r.stderr
+    ours = json.loads(subprocess.run([str(TOOLBOX), "list", "--json"], capture_output=True, text=True).stdout)
+    for a in ours["algorithms"]:
+        assert f"lidartoolbox:{a['id'].replace('-', '')}\t{a['title']}" in r.stdout
+
+
+def test_the_help_shows_the_parameters_with_units_and_ranges(qgis_env):
+    r = _qgis(qgis_env, "help", "lidartoolbox:dtm")
+    assert r.returncode == 0, r.stderr
+    assert "RESOLUTION_M [m] (0.05 to 1000.0): DTM cell size" in r.stdout
+    assert "REFINE_CELL_M [m] (0.1 to 50.0)" in r.stdout and "empty: auto" in r.stdout
+    assert "Mongus" in r.stdout  # the method's reference
+    for name in ("INPUT", "OUTPUT", "OUTPUT_CLASSIFIED", "GROUND"):
+        assert f"\n{name}: " in r.stdout
+
+
+def test_dtm_through_qgis_writes_what_the_command_line_writes(qgis_env, tmp_path):
+    src = shared_file("lidR/Topography.laz")
+    r = _qgis(qgis_env, "run", "lidartoolbox:dtm", "--", f"INPUT={src}", "RESOLUTION_M=0.5",
+              f"OUTPUT={tmp_path / 'q.tif'}", f"OUTPUT_CLASSIFIED={tmp_path / 'q.laz'}")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    c = subprocess.run([str(TOOLBOX), "run", "dtm", str(src), "-o", str(tmp_path / "c.tif"), "--set", "resolution_m=0.5",
+                        "--output-path", f"classified={tmp_path / 'c.laz'}", "--quiet"], capture_output=True, text=True)
+    assert c.returncode == 0, c.stderr
+    assert (tmp_path / "q.tif").read_bytes() == (tmp_path / "c.tif").read_bytes()
+    import laspy
+    import numpy as np
+
+    a, b = laspy.read(tmp_path / "q.laz"), laspy.read(tmp_path / "c.laz")
+    assert np.array_equal(a.classification, b.classification) and np.array_equal(a.X, b.X)
+
+
+def test_powerlines_through_qgis_gives_the_command_lines_layers(qgis_env, tmp_path):
+    import geopandas as gpd
+    import pyogrio
+
+    src = shared_file("oakland_mls/oakland_part2_ag.laz")
+    r = _qgis(qgis_env, "run", "lidartoolbox:powerlines", "--", f"INPUT={src}", f"OUTPUT={tmp_path / 'q.gpkg'}")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    c = subprocess.run([str(TOOLBOX), "run", "powerlines", str(src), "-o", str(tmp_path / "c.gpkg"), "--quiet"],
+                       capture_output=True, text=True)
+    assert c.returncode == 0, c.stderr
+    layers = [n for n, _ in pyogrio.list_layers(tmp_path / "c.gpkg") if n != "layer_styles"]
+    assert "conductors" in layers
+    for name in layers:
+        a = gpd.read_file(tmp_path / "q.gpkg", layer=name)
+        b = gpd.read_file(tmp_path / "c.gpkg", layer=name)
+        assert len(a) == len(b)
+        assert all(x.equals(y) for x, y in zip(a.geometry, b.geometry))
+
+
+def test_a_missing_input_fails_with_the_toolboxs_line_and_writes_nothing(qgis_env, tmp_path):
+    r = _qgis(qgis_env, "run", "lidartoolbox:dtm", "--", f"INPUT={tmp_path / 'nothere.laz'}",
+              f"OUTPUT={tmp_path / 'q.tif'}")
+    assert r.returncode != 0
+    assert "nothere.laz" in r.stdout + r.stderr and "does not exist" in r.stdout + r.stderr
+    assert not list(tmp_path.glob("q*"))
+
+
+def test_a_zip_for_install_from_zip_holds_the_plugin(tmp_path):
+    import zipfile
+
+    r = subprocess.run([str(TOOLBOX), "qgis", "package", "-o", str(tmp_path / "lidar_toolbox.zip")], capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    names = zipfile.ZipFile(tmp_path / "lidar_toolbox.zip").namelist()
+    for f in ("metadata.txt", "__init__.py", "provider.py", "algorithms.json", "toolbox.json"):
+        assert f"lidar_toolbox/{f}" in names
+    meta = zipfile.ZipFile(tmp_path / "lidar_toolbox.zip").read("lidar_toolbox/metadata.txt").decode()
+    assert "hasProcessingProvider=yes" in meta and "qgisMinimumVersion=3.22" in meta
