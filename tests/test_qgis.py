@@ -4,6 +4,7 @@ QGIS's own ``qgis_process`` (headless), against the command line's outputs."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import os
 import shutil
 import subprocess
@@ -104,3 +105,66 @@ def test_a_zip_for_install_from_zip_holds_the_plugin(tmp_path):
         assert f"lidar_toolbox/{f}" in names
     meta = zipfile.ZipFile(tmp_path / "lidar_toolbox.zip").read("lidar_toolbox/metadata.txt").decode()
     assert "hasProcessingProvider=yes" in meta and "qgisMinimumVersion=3.22" in meta
+
+
+CANCEL_SCRIPT = r"""
+import sys, threading
+sys.path.insert(0, sys.argv[1])
+from qgis.core import QgsApplication, QgsProcessingFeedback
+app = QgsApplication([], False)
+app.initQgis()
+from lidar_toolbox.provider import run_toolbox
+fb = QgsProcessingFeedback()
+seen = []
+fb.progressChanged.connect(lambda p: seen.append(p))
+threading.Timer(float(sys.argv[2]), fb.cancel).start()  # a powerlines run on AHN4 takes 10 s or more
+try:
+    run_toolbox(sys.argv[3:], fb)
+    print("FINISHED")
+except Exception as exc:
+    print("RAISED", type(exc).__name__, exc, "after", len(seen), "progress updates")
+"""
+
+
+@pytest.mark.skipif(shutil.which("python3") is None, reason="QGIS's Python (python3 with python3-qgis) is absent")
+def test_cancel_ends_the_run_and_leaves_nothing(qgis_env, tmp_path):
+    """The provider's runner with QGIS's own feedback object: cancelled a few seconds into a
+    powerlines run, the toolbox is terminated and keeps nothing of the run."""
+    src = shared_file("ahn4_corridor/07CZ2_14.laz")
+    plugins = Path(qgis_env["QGIS_CUSTOM_CONFIG_PATH"]) / "profiles" / "default" / "python" / "plugins"
+    (tmp_path / "out").mkdir()
+    cmd = [str(TOOLBOX), "run", "powerlines", str(src), "-o", str(tmp_path / "out" / "lines.gpkg"), "--json",
+           "--progress-json"]
+    env = {k: v for k, v in qgis_env.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    r = subprocess.run(["/usr/bin/python3", "-c", CANCEL_SCRIPT, str(plugins), "4", *cmd], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert "RAISED QgsProcessingException cancelled" in r.stdout, r.stdout + r.stderr[-2000:]
+    assert list((tmp_path / "out").iterdir()) == []  # no output, no temporary file
+
+
+LOAD_SCRIPT = r"""
+import sys
+sys.path.insert(0, sys.argv[1])
+from qgis.core import QgsApplication, QgsProcessingContext, QgsProject
+app = QgsApplication([], False)
+app.initQgis()
+from lidar_toolbox.provider import _load_layers
+ctx = QgsProcessingContext()
+ctx.setProject(QgsProject.instance())
+_load_layers(sys.argv[2], ctx)
+print(sorted(k.split("layername=")[1] for k in ctx.layersToLoadOnCompletion()))
+"""
+
+
+def test_from_the_gui_every_layer_of_a_geopackage_output_is_loaded(qgis_env, tmp_path):
+    """Run from the GUI (a context with a project), each layer of a vector output is added to
+    the project (its style comes from the GeoPackage's layer_styles)."""
+    import pyogrio
+
+    src = shared_file("oakland_mls/oakland_part2_ag.laz")
+    subprocess.run([str(TOOLBOX), "run", "powerlines", str(src), "-o", str(tmp_path / "l.gpkg"), "--quiet"], check=True)
+    plugins = Path(qgis_env["QGIS_CUSTOM_CONFIG_PATH"]) / "profiles" / "default" / "python" / "plugins"
+    r = subprocess.run(["/usr/bin/python3", "-c", LOAD_SCRIPT, str(plugins), str(tmp_path / "l.gpkg")],
+                       capture_output=True, text=True, env=qgis_env, timeout=120)
+    want = sorted(n for n, _ in pyogrio.list_layers(tmp_path / "l.gpkg") if n != "layer_styles")
+    assert r.stdout.strip().splitlines()[-1] == str(want), r.stdout + r.stderr[-1500:]

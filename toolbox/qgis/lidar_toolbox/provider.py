@@ -161,7 +161,27 @@ class ToolboxAlgorithm(QgsProcessingAlgorithm):
         feedback.pushCommandInfo(" ".join(cmd))
         report = run_toolbox(cmd, feedback)
         feedback.pushInfo(f"{self.desc['id']}: done in {report.get('timings_s', {}).get('total', '?')} s")
+        if context.project() is not None:  # from the GUI: each layer of a GeoPackage, styled from its layer_styles
+            kinds = {("OUTPUT" if o is _primary_output(self.desc) else f"OUTPUT_{o['name'].upper()}"): o["kind"]
+                     for o in self.desc["outputs"]}
+            for name, path in outputs.items():
+                if kinds.get(name) == "vector":
+                    _load_layers(path, context)
         return outputs
+
+
+def _load_layers(path, context) -> None:
+    from osgeo import ogr
+    from qgis.core import QgsProcessingContext
+
+    ds = ogr.Open(path)
+    if ds is None:
+        return
+    for i in range(ds.GetLayerCount()):
+        layer = ds.GetLayerByIndex(i).GetName()
+        if layer != "layer_styles":
+            context.addLayerToLoadOnCompletion(f"{path}|layername={layer}",
+                                               QgsProcessingContext.LayerDetails(layer, context.project(), layer))
 
 
 def _parameter(p):
