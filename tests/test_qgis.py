@@ -26,7 +26,20 @@ def qgis_env(tmp_path_factory):
     r = subprocess.run([str(TOOLBOX), "qgis", "install", "--profile-dir", str(cfg / "profiles" / "default")],
                        capture_output=True, text=True, env=env)
     assert r.returncode == 0, r.stderr
+    r = subprocess.run([QGIS, "plugins"], capture_output=True, text=True, env=env)
+    assert "* lidar_toolbox" in r.stdout, r.stdout + r.stderr  # installed and enabled (the star)
     return env
+
+
+@pytest.fixture(scope="module")
+def powerlines_cli(tmp_path_factory):
+    """One command-line powerlines run on Oakland part2_ag (the reference of two tests)."""
+    src = shared_file("oakland_mls/oakland_part2_ag.laz")
+    out = tmp_path_factory.mktemp("pl_cli") / "c.gpkg"
+    c = subprocess.run([str(TOOLBOX), "run", "powerlines", str(src), "-o", str(out), "--quiet"], capture_output=True,
+                       text=True)
+    assert c.returncode == 0, c.stderr
+    return src, out
 
 
 def _qgis(env, *args, timeout=300):
@@ -67,21 +80,18 @@ def test_dtm_through_qgis_writes_what_the_command_line_writes(qgis_env, tmp_path
     assert np.array_equal(a.classification, b.classification) and np.array_equal(a.X, b.X)
 
 
-def test_powerlines_through_qgis_gives_the_command_lines_layers(qgis_env, tmp_path):
+def test_powerlines_through_qgis_gives_the_command_lines_layers(qgis_env, powerlines_cli, tmp_path):
     import geopandas as gpd
     import pyogrio
 
-    src = shared_file("oakland_mls/oakland_part2_ag.laz")
+    src, cli = powerlines_cli
     r = _qgis(qgis_env, "run", "lidartoolbox:powerlines", "--", f"INPUT={src}", f"OUTPUT={tmp_path / 'q.gpkg'}")
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    c = subprocess.run([str(TOOLBOX), "run", "powerlines", str(src), "-o", str(tmp_path / "c.gpkg"), "--quiet"],
-                       capture_output=True, text=True)
-    assert c.returncode == 0, c.stderr
-    layers = [n for n, _ in pyogrio.list_layers(tmp_path / "c.gpkg") if n != "layer_styles"]
+    layers = [n for n, _ in pyogrio.list_layers(cli) if n != "layer_styles"]
     assert "conductors" in layers
     for name in layers:
         a = gpd.read_file(tmp_path / "q.gpkg", layer=name)
-        b = gpd.read_file(tmp_path / "c.gpkg", layer=name)
+        b = gpd.read_file(cli, layer=name)
         assert len(a) == len(b)
         assert all(x.equals(y) for x, y in zip(a.geometry, b.geometry))
 
@@ -156,15 +166,37 @@ print(sorted(k.split("layername=")[1] for k in ctx.layersToLoadOnCompletion()))
 """
 
 
-def test_from_the_gui_every_layer_of_a_geopackage_output_is_loaded(qgis_env, tmp_path):
+def test_from_the_gui_every_layer_of_a_geopackage_output_is_loaded(qgis_env, powerlines_cli):
     """Run from the GUI (a context with a project), each layer of a vector output is added to
     the project (its style comes from the GeoPackage's layer_styles)."""
     import pyogrio
 
-    src = shared_file("oakland_mls/oakland_part2_ag.laz")
-    subprocess.run([str(TOOLBOX), "run", "powerlines", str(src), "-o", str(tmp_path / "l.gpkg"), "--quiet"], check=True)
+    _, cli = powerlines_cli
     plugins = Path(qgis_env["QGIS_CUSTOM_CONFIG_PATH"]) / "profiles" / "default" / "python" / "plugins"
-    r = subprocess.run(["/usr/bin/python3", "-c", LOAD_SCRIPT, str(plugins), str(tmp_path / "l.gpkg")],
+    r = subprocess.run(["/usr/bin/python3", "-c", LOAD_SCRIPT, str(plugins), str(cli)],
                        capture_output=True, text=True, env=qgis_env, timeout=120)
-    want = sorted(n for n, _ in pyogrio.list_layers(tmp_path / "l.gpkg") if n != "layer_styles")
+    want = sorted(n for n, _ in pyogrio.list_layers(cli) if n != "layer_styles")
     assert r.stdout.strip().splitlines()[-1] == str(want), r.stdout + r.stderr[-1500:]
+
+
+def test_a_third_party_plugin_appears_in_qgis_once_install_runs_again(qgis_env, tmp_path):
+    """examples/third_party_plugin, made visible as an installed distribution (its dist-info and
+    package on the path, as pip would leave them), shows up after ``toolbox qgis install``."""
+    root = Path(__file__).resolve().parents[1]
+    site = tmp_path / "site"
+    info = site / "toolbox_density-1.0.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toolbox-density\nVersion: 1.0.0\n")
+    (info / "entry_points.txt").write_text("[toolbox.plugins]\ndensity = toolbox_density.plugin\n")
+    env = {**qgis_env, "PYTHONPATH": os.pathsep.join([str(site), str(root / "examples" / "third_party_plugin")])}
+    profile = Path(qgis_env["QGIS_CUSTOM_CONFIG_PATH"]) / "profiles" / "default"
+    before = _qgis(qgis_env, "list").stdout
+    assert "lidartoolbox:pointdensity" not in before
+    try:
+        r = subprocess.run([str(TOOLBOX), "qgis", "install", "--profile-dir", str(profile)], capture_output=True,
+                           text=True, env=env)
+        assert r.returncode == 0, r.stderr
+        assert "lidartoolbox:pointdensity\tPoint density raster" in _qgis(qgis_env, "list").stdout
+    finally:  # the other tests' profile without it again
+        subprocess.run([str(TOOLBOX), "qgis", "install", "--profile-dir", str(profile)], check=True, env=qgis_env,
+                       capture_output=True)

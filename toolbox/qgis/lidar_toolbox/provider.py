@@ -13,7 +13,7 @@ import subprocess
 import threading
 from pathlib import Path
 
-from qgis.core import (QgsProcessing, QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingParameterBoolean,
+from qgis.core import (QgsProcessingAlgorithm, QgsProcessingException, QgsProcessingParameterBoolean,
                        QgsProcessingParameterEnum, QgsProcessingParameterFile, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterString, QgsProcessingProvider)
@@ -49,6 +49,16 @@ class ToolboxProvider(QgsProcessingProvider):
         for desc in json.loads(path.read_text(encoding="utf-8"))["algorithms"]:
             if _runnable(desc):
                 self.addAlgorithm(ToolboxAlgorithm(desc))
+
+
+def _point_cloud_layers() -> bool:
+    """Point cloud inputs as layers where this QGIS can load LAS/LAZ (its PDAL provider; QGIS 3.22
+    from Debian has the parameter but not the provider), else as files."""
+    import qgis.core
+    from qgis.core import QgsProviderRegistry
+
+    return hasattr(qgis.core, "QgsProcessingParameterPointCloudLayer") and \
+        "pdal" in QgsProviderRegistry.instance().providerList()
 
 
 def _runnable(desc) -> bool:
@@ -101,6 +111,10 @@ class ToolboxAlgorithm(QgsProcessingAlgorithm):
             label = f"{inp['name']}: {inp['description']}"
             if inp["kind"] == "raster":
                 self.addParameter(QgsProcessingParameterRasterLayer(name, label, optional=inp["optional"]))
+            elif inp["kind"] == "points" and _point_cloud_layers():
+                from qgis.core import QgsProcessingParameterPointCloudLayer  # QGIS 3.18 and later
+
+                self.addParameter(QgsProcessingParameterPointCloudLayer(name, label, optional=inp["optional"]))
             elif inp["kind"] == "points":
                 self.addParameter(QgsProcessingParameterFile(name, label, fileFilter=POINT_FILTER,
                                                              optional=inp["optional"]))
@@ -133,6 +147,9 @@ class ToolboxAlgorithm(QgsProcessingAlgorithm):
             name = "INPUT" if k == 0 else inp["name"].upper()
             if inp["kind"] == "raster":
                 layer = self.parameterAsRasterLayer(parameters, name, context)
+                value = layer.source() if layer is not None else ""
+            elif inp["kind"] == "points" and _point_cloud_layers():
+                layer = self.parameterAsPointCloudLayer(parameters, name, context)
                 value = layer.source() if layer is not None else ""
             else:
                 value = self.parameterAsFile(parameters, name, context)
