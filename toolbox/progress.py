@@ -57,14 +57,10 @@ class JsonBar:
     def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
         pass
 
-    def set_description(self, desc: str = "", refresh: bool = True) -> None:
-        self.desc = desc
-        self._emit()
-
     def close(self) -> None:
         pass
 
-    def __enter__(self):
+    def __enter__(self):  # the stages' bar is used as ``with ctx.progress(...) as bar``
         return self
 
     def __exit__(self, *exc):

@@ -388,6 +388,15 @@ def _peak_rss_mb() -> float:
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)  # KiB on Linux
 
 
+def _task_points(task: Mapping[str, Any], tile: Tile):
+    """The points of a task's tile and buffer (``read_tile`` on the task's files, splits, CRS)."""
+    from .io.points import parse_crs
+
+    crs = parse_crs(task["crs"]) if task.get("crs") else None
+    return read_tile([SurveyFile(**f) for f in task["files"]], tile, task["buffer"], crs=crs, dims=task.get("dims"),
+                     splits=task.get("splits"))
+
+
 def run_tile(task: Mapping[str, Any]) -> dict:
     """Run the algorithm on one tile and write the tile's results; never raises (a failure is
     returned with its reason). ``task`` is a plain dict, so that a local process and a Dask
@@ -406,12 +415,7 @@ def run_tile(task: Mapping[str, Any]) -> dict:
         reg = rediscover(task.get("entry_points"))
         alg = reg.get(task["algorithm"])
         tile = Tile(**task["tile"])
-        files = [SurveyFile(**f) for f in task["files"]]
-        from .io.points import parse_crs
-
-        crs = parse_crs(task["crs"]) if task.get("crs") else None
-        pc, core, decoded, read = read_tile(files, tile, task["buffer"], crs=crs, dims=task.get("dims"),
-                                            splits=task.get("splits"))
+        pc, core, decoded, read = _task_points(task, tile)
         stats = {"n_points": int(len(pc)), "n_core_points": int(core.sum()), "n_decoded_points": decoded,
                  "n_read_points": read,
                  "read_s": round(time.perf_counter() - t0, 3)}
@@ -1042,14 +1046,11 @@ def run_summary(task: Mapping[str, Any]) -> dict:
     name = task["name"]
     try:
         progress.set_quiet(True)
-        from .io.points import parse_crs
         from .registry import rediscover
 
         alg = rediscover(task.get("entry_points")).get(task["algorithm"])
         tile = Tile(**task["tile"])
-        crs = parse_crs(task["crs"]) if task.get("crs") else None
-        pc, core, _, _ = read_tile([SurveyFile(**f) for f in task["files"]], tile, task["buffer"], crs=crs,
-                                   dims=task.get("dims"), splits=task.get("splits"))
+        pc, _, _, _ = _task_points(task, tile)
         sums = alg.survey_summary(pc, (tile.x0, tile.y0, tile.x1, tile.y1), dict(task["params"]))
         return {"tile": name, "status": "done", "sums": dict(sums)}
     except Exception as exc:  # its tile fails the same way, and says so
@@ -1077,7 +1078,7 @@ def _split_files(plan: SurveyPlan, workers: int, scheduler, pools) -> dict:
     for path in failed:
         log.warning("%s could not be split (%s); its tiles read it whole",
                     path, next((r.get("error") for r in results if r.get("file") == path), "its worker died"))
-    for task in plan.tasks:
+    for task in plan.tasks + plan.summaries:
         task["splits"] = {p: d for p, d in task.get("splits", {}).items() if p not in failed}
     done = [r for r in results if r.get("status") == "done"]
     return {"n_files": len(done), "n_decoded_points": sum(r["n_decoded_points"] for r in done)}

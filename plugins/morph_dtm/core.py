@@ -313,7 +313,11 @@ def spacing_counts(x, y, z, s: "GroundSettings", core_box) -> tuple[int, int]:
     return n_points, n_cells
 
 
-def refine_cell_size(spacing: float, filter_cell: float, smallest: float, per_spacing: float = 1.25) -> float:
+REFINE_PER_SPACING = 1.25  # the last refinement's cell over the point spacing (a 3x3 block: ~14 points)
+
+
+def refine_cell_size(spacing: float, filter_cell: float, smallest: float,
+                     per_spacing: float = REFINE_PER_SPACING) -> float:
     """Cell of the last refinement: ``per_spacing`` x the point spacing (a 3x3 block then holds about
     14 points, enough for a robust plane), between ``smallest`` and the filter cell."""
     return float(np.clip(per_spacing * spacing, min(smallest, filter_cell), filter_cell))
@@ -343,7 +347,7 @@ class GroundSettings:
     refill_gaps: bool = True
     refine_cell: float | None = None  # the last refinement's cell (None: from the point spacing)
     min_refine_cell: float = 0.0
-    refine_per_spacing: float = 1.25
+    refine_per_spacing: float = REFINE_PER_SPACING
     max_gap: float | None = None  # widest hole without returns inside the footprint (None: any enclosed one)
 
 

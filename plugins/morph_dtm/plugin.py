@@ -58,15 +58,14 @@ def survey_summary(pc, core_box, p) -> dict:
 def survey_values(sums, p, horizontal_unit_m: float) -> dict:
     """The survey's refine_cell_m, from the tiles' ``survey_summary`` summed: what one run over
     the whole survey would choose."""
-    from .core import GroundSettings, mean_spacing, refine_cell_size
+    from .core import REFINE_PER_SPACING, mean_spacing, refine_cell_size
 
     if not sums.get("n_points"):
         return {}
     hu = horizontal_unit_m
     cell = p["filter_cell_m"] / hu
     spacing = mean_spacing(sums["n_points"], sums["n_footprint_cells"], cell)
-    per = GroundSettings.__dataclass_fields__["refine_per_spacing"].default
-    return {"refine_cell_m": refine_cell_size(spacing, cell, MIN_AUTO_REFINE_CELL_M / hu, per) * hu}
+    return {"refine_cell_m": refine_cell_size(spacing, cell, MIN_AUTO_REFINE_CELL_M / hu, REFINE_PER_SPACING) * hu}
 
 
 def _ground_settings(pc, p):
