@@ -95,7 +95,7 @@ def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10,
     from toolbox.runner import run_algorithm
     from toolbox_plugins.pylon_pose.core import rotation
 
-    from toolbox.io.cameras import read_colmap_text, write_colmap_text
+    from toolbox.io.cameras import read_colmap, write_colmap
     from toolbox_plugins.synthetic_scene.generator.pylons import perturb_images
 
     rows = []
@@ -107,10 +107,10 @@ def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10,
             cams = d / "colmap"
             label = f"seed {seed}"
             if shift_m or turn_deg:
-                cameras, images = read_colmap_text(cams)
+                cameras, images = read_colmap(cams)
                 cams = d / "colmap_perturbed"
                 cams.mkdir()
-                write_colmap_text(cams, cameras, perturb_images(images, shift_m, turn_deg, seed=seed))
+                write_colmap(cams, cameras, perturb_images(images, shift_m, turn_deg, seed=seed))
                 label = f"seed {seed} cameras off {shift_m} m {turn_deg} deg"
             for how in hypotheses:
                 t0 = time.perf_counter()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from toolbox.errors import DataError
-from toolbox.io.cameras import Camera, Image, quaternion_from_matrix, read_colmap_text, write_colmap_text
+from toolbox.io.cameras import Camera, Image, colmap_form, quaternion_from_matrix, read_colmap, write_colmap
 from toolbox_plugins.pylon_pose import core, reference
 
 # one worker: the photo survey (20 s to make) is built once for every test that reads it
@@ -23,18 +23,20 @@ def _look_at(centre, target):
     return R, -R @ centre
 
 
-def test_colmap_text_round_trip(tmp_path):
+@pytest.mark.parametrize("binary", [False, True], ids=["text", "binary"])
+def test_colmap_round_trip_binary_and_text(tmp_path, binary):
     R, t = _look_at(np.array([100.0, -20.0, 80.0]), [0.0, 0.0, 10.0])
     cams = {1: Camera(1, "OPENCV", 2400, 1600, (2410.0, 2405.0, 1199.5, 801.0, -0.08, 0.02, 1e-4, -2e-4)),
             2: Camera(2, "SIMPLE_RADIAL", 2000, 1500, (1900.0, 1000.0, 750.0, -0.05))}
-    imgs = {7: Image(7, "a photo.jpg", 1, quaternion_from_matrix(R), t), 8: Image(8, "b.jpg", 2, np.array([1.0, 0, 0, 0]),
-                                                                              np.zeros(3))}
-    write_colmap_text(tmp_path, cams, imgs)
-    # a points line with triples, as COLMAP writes them, must not be taken for a photo
-    text = (tmp_path / "images.txt").read_text().replace("a photo.jpg\n\n", "a photo.jpg\n12.5 30.25 -1 40.0 41.0 17\n")
-    (tmp_path / "images.txt").write_text(text)
-    c2, i2 = read_colmap_text(tmp_path)
-    assert set(i2) == {7, 8} and i2[7].name == "a photo.jpg"
+    name = "a photo.jpg" if binary else "a_photo.jpg"  # COLMAP's text form ends a name at a space
+    imgs = {7: Image(7, name, 1, quaternion_from_matrix(R), t), 8: Image(8, "b.jpg", 2, np.array([1.0, 0, 0, 0]), np.zeros(3))}
+    write_colmap(tmp_path, cams, imgs, binary=binary)
+    assert colmap_form(tmp_path) == ("binary" if binary else "text")
+    if not binary:  # a points line with triples, as COLMAP writes them, must not be taken for a photo
+        text = (tmp_path / "images.txt").read_text()
+        (tmp_path / "images.txt").write_text(text.replace(f"{name}\n\n", f"{name}\n12.5 30.25 -1 40.0 41.0 -1\n"))
+    c2, i2 = read_colmap(tmp_path)
+    assert set(i2) == {7, 8} and i2[7].name == name
     np.testing.assert_allclose(i2[7].R, R, atol=1e-12)
     np.testing.assert_allclose(i2[7].centre, [100.0, -20.0, 80.0], atol=1e-9)
     np.testing.assert_allclose(i2[7].world_to_camera([0.0, 0.0, 10.0])[:2], 0.0, atol=1e-9)  # on the axis
@@ -43,21 +45,37 @@ def test_colmap_text_round_trip(tmp_path):
     np.testing.assert_array_equal(c2[2].distortion, [-0.05, 0, 0, 0, 0])
 
 
-def test_colmap_bad_input_says_which_file_and_line(tmp_path):
+def test_colmap_bad_input_says_which_folder_and_what(tmp_path):
     with pytest.raises(DataError, match="is not a folder"):
-        read_colmap_text(tmp_path / "nope")
+        read_colmap(tmp_path / "nope")
+    with pytest.raises(DataError, match="has no COLMAP model"):
+        read_colmap(tmp_path)
     (tmp_path / "cameras.txt").write_text("# c\n1 FISHEYE_X 100 100 1 2 3\n")
-    with pytest.raises(DataError, match=r"cameras.txt:2: camera model 'FISHEYE_X' is not supported"):
-        read_colmap_text(tmp_path)
+    with pytest.raises(DataError, match="has cameras.txt but no images.txt"):
+        read_colmap(tmp_path)
+    (tmp_path / "images.txt").write_text("")
+    with pytest.raises(DataError, match="a camera in cameras.txt has a model COLMAP does not know"):
+        read_colmap(tmp_path)
     (tmp_path / "cameras.txt").write_text("1 PINHOLE 100 100 1 2 3\n")
-    with pytest.raises(DataError, match="PINHOLE takes 4 parameters"):
-        read_colmap_text(tmp_path)
+    with pytest.raises(DataError, match="wrong number of parameters for its model"):
+        read_colmap(tmp_path)
+    (tmp_path / "cameras.txt").write_text("1 SIMPLE_RADIAL_FISHEYE 100 100 90 50 50 0.1\n")
+    with pytest.raises(DataError, match="camera 1 is SIMPLE_RADIAL_FISHEYE, which is not supported"):
+        read_colmap(tmp_path)
     (tmp_path / "cameras.txt").write_text("1 PINHOLE 100 100 90 90 50 50\n")
-    with pytest.raises(DataError, match="has no images.txt"):
-        read_colmap_text(tmp_path)
+    with pytest.raises(DataError, match="has no posed image"):
+        read_colmap(tmp_path)
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 3 x.jpg\n\n")
     with pytest.raises(DataError, match="uses camera 3, which cameras.txt lacks"):
-        read_colmap_text(tmp_path)
+        read_colmap(tmp_path)
+    write_colmap(tmp_path, {1: Camera(1, "PINHOLE", 100, 100, (90.0, 90.0, 50.0, 50.0))},
+                 {k: Image(k, f"{k}.jpg", 1, np.array([1.0, 0, 0, 0]), np.zeros(3)) for k in (1, 2)}, binary=True)
+    assert len(read_colmap(tmp_path)[1]) == 2  # the binary form is read where both are
+    data = (tmp_path / "images.bin").read_bytes()
+    (tmp_path / "images.bin").write_bytes(data[:len(data) // 2])  # a copy cut short
+    with pytest.raises(DataError, match=r"\(binary\): COLMAP cannot read it, it is damaged") as e:
+        read_colmap(tmp_path)
+    assert "\n" not in str(e.value)
 
 
 def test_undistortion_inverts_the_brown_model():
@@ -162,7 +180,7 @@ def test_survey_has_what_a_photogrammetry_user_has(survey):
     assert len(photos) == 16 and cv2.imread(str(photos[0])).shape == (1600, 2400, 3)
     truth = json.loads((survey / "points_truth.json").read_text())
     assert {p["model"] for p in truth["pylons"]} == {"vl220", "u110"}
-    cams, imgs = read_colmap_text(survey / "colmap")
+    cams, imgs = read_colmap(survey / "colmap")
     mcams, mimgs = read_metashape_xml(survey / "cameras.xml", "EPSG:25832")
     by_name = {i.name: i for i in mimgs.values()}
     for i in imgs.values():  # the Metashape XML holds the same cameras (through a geocentric chunk frame)

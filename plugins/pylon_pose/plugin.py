@@ -141,7 +141,8 @@ def _run(inputs, params, ctx):
         best = None
         for name, (a, b, h, sym) in models.items():
             r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
-                                 min_score=params["min_score"], hypotheses=params["hypotheses"])
+                                 min_score=params["min_score"], hypotheses=params["hypotheses"],
+                                 max_tilt_deg=params["max_tilt_deg"])
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
         cand_scores.append(best[1].score if best is not None else 0.0)
@@ -162,23 +163,26 @@ def _run(inputs, params, ctx):
     stats["n_pylons"] = len(found)
     stats["started_from"] = {k: sum(r.start == k for _, r in found) for k in ("grid", "triangles")}
     stats["scores"] = [round(r.score, 3) for _, r in found]
-    layers = _layers(found, models, origin, dem.crs, params["min_score"])
+    layers = _layers(found, models, origin, dem.crs, params["min_score"], params["leaning_deg"])
+    stats["n_leaning"] = int(layers["pylons"]["leaning"].sum())
     overlays = _overlays(found, models, views, cameras, images, inputs["photos"]) if ctx.wants("overlays") else None
     return toolbox.Result(outputs={"pylons": layers, "overlays": overlays}, stats=stats)
 
 
-def _layers(found, models, origin, crs, min_score):
+def _layers(found, models, origin, crs, min_score, leaning_deg):
     import geopandas as gpd
     import numpy as np
     from shapely.geometry import Point, Polygon
 
-    from . import core
+    from . import core, search
 
     rows, pts, feet = [], [], []
     for name, r in found:
         x, y, z, h, p, ro = r.pose
         X = np.array([x, y, z]) + origin
+        tilt, azimuth = search.tilt_of(r.pose)
         rows.append({"heading_deg": round(float(h), 3), "roll_deg": round(float(ro), 3), "pitch_deg": round(float(p), 3),
+                     "tilt_deg": round(tilt, 3), "tilt_azimuth_deg": round(azimuth, 1), "leaning": bool(tilt > leaning_deg),
                      "score": round(r.score, 4), "mad_x_m": round(float(r.mad[0]), 3), "mad_y_m": round(float(r.mad[1]), 3),
                      "mad_z_m": round(float(r.mad[2]), 3), "mad_heading_deg": round(float(r.mad[3]), 3),
                      "n_photos": int(r.n_photos), "photo_share": round(r.photo_share(min_score / 2), 3),
@@ -196,7 +200,7 @@ def _layers(found, models, origin, crs, min_score):
             feet.append(Polygon(W[:, :2]))
         else:
             feet.append(None)
-    cols = ["heading_deg", "roll_deg", "pitch_deg", "score", "mad_x_m", "mad_y_m", "mad_z_m", "mad_heading_deg", "n_photos",
+    cols = ["heading_deg", "roll_deg", "pitch_deg", "tilt_deg", "tilt_azimuth_deg", "leaning", "score", "mad_x_m", "mad_y_m", "mad_z_m", "mad_heading_deg", "n_photos",
             "photo_share", "rms_px", "edge_share", "model"]
     import pandas as pd
 
@@ -286,12 +290,17 @@ def toolbox_algorithms():
             Parameter("min_photo_share", float, 0.5, "share of the photos that see a candidate in which it must match "
                       "at least half of min_score: a pylon shows in every photo that sees it, clutter that lines up "
                       "with the model in one or two", minimum=0.0, maximum=1.0),
+            Parameter("max_tilt_deg", float, 5.0, "the most a pylon may lean: its tilt is searched and fitted up "
+                      "to this (0: upright, as the method)", unit="deg", minimum=0.0, maximum=10.0),
+            Parameter("leaning_deg", float, 0.5, "a pylon tilted more than this is flagged leaning (the usual "
+                      "erection tolerance of a lattice tower)", unit="deg", minimum=0.0, maximum=10.0),
             Parameter("mode", str, "max", "direction smoothing of the photo descriptor: max (the thesis's text) or "
                       "sum (its listing)", choices=("max", "sum")),
         ],
         inputs=[
             Input("photos", "photos", "the folder of photos the cameras name"),
-            Input("cameras", "file", "a COLMAP text model folder (cameras.txt, images.txt) or a Metashape camera XML, "
+            Input("cameras", "file", "a COLMAP model folder, binary or text (cameras.bin, images.bin or cameras.txt, "
+                  "images.txt), or a Metashape camera XML, "
                   "georeferenced in the DEM's CRS"),
             Input("dem", "raster", "terrain heights (GeoTIFF) covering the photos' views"),
             Input("model", "file", "a pylon model (Wavefront OBJ with 'l' beams, or JSON), or a folder of them as a "
@@ -300,7 +309,9 @@ def toolbox_algorithms():
                   optional=True),
         ],
         outputs=[
-            Output("pylons", "vector", "layers pylons (PointZ at the base: heading_deg, roll_deg, pitch_deg, score, "
+            Output("pylons", "vector", "layers pylons (PointZ at the base: heading_deg, roll_deg, pitch_deg, "
+                   "tilt_deg: the axis's angle from the plumb line, tilt_azimuth_deg: the compass direction its top "
+                   "leans toward (clockwise from grid north), leaning: tilt_deg above leaning_deg, score, "
                    "mad_x_m, mad_y_m, mad_z_m, mad_heading_deg, n_photos, photo_share: the share of them in which it matches "
                    "at least half of min_score, rms_px: the matched beam points' distance "
                    "to their photo edges, edge_share: their share of the beam points in view, model) and "

@@ -380,9 +380,54 @@ def _best_distinct(poses, scores, n, min_dist_m=2.0, min_heading_deg=20.0, perio
     return out
 
 
+def tilt_of(pose: np.ndarray) -> tuple[float, float]:
+    """(tilt, azimuth) of a pose's vertical axis: its angle from the plumb line and the compass
+    direction (degrees clockwise from grid north) its top leans toward."""
+    up = core.rotation(pose[3], pose[4], pose[5])[:, 2]
+    return (float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))),
+            float(np.degrees(np.arctan2(up[0], up[1])) % 360.0))
+
+
+def tilted_poses(pose: np.ndarray, tilts: np.ndarray, pivot_m: float) -> np.ndarray:
+    """``pose`` with each (pitch, roll) of ``tilts`` (N, 2), the base moved so that the model's
+    axis still passes the same point ``pivot_m`` up it: an upright fit of a leaning tower holds its
+    body, not its base, so the base is where a tilt must move."""
+    up = core.rotation(pose[3], pose[4], pose[5])[:, 2]
+    out = np.repeat(np.asarray(pose, float)[None], len(tilts), axis=0)
+    out[:, 4:6] = tilts
+    for k, (p, r) in enumerate(tilts):
+        out[k, :3] = pose[:3] + pivot_m * (up - core.rotation(pose[3], p, r)[:, 2])
+    return out
+
+
+def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_deg: float, kernel=None,
+                steps_deg=(1.0, 0.25), shift_m=(0.5, 0.25), pivot_share: float = 0.4) -> np.ndarray:
+    """A leaning pylon's tilt by A_s (the method searches an upright tower; its future work is
+    this): pitch and roll on a grid of ``steps_deg[0]`` over the disc of ``max_tilt_deg``, then of
+    ``steps_deg[1]`` within one coarse step of the best, each with the base moved to keep the
+    axis through ``pivot_share`` of the height and shifted ± ``shift_m`` on a grid of half that; the
+    pose summed best over the photos. The upright pose is one of the candidates, so an upright
+    tower keeps it unless a tilt matches better."""
+    best = np.asarray(pose, float).copy()
+    centre = best[4:6].copy()
+    for k, step in enumerate(steps_deg):
+        reach = max_tilt_deg if k == 0 else steps_deg[k - 1]
+        g = np.arange(-reach, reach + 1e-9, step)
+        t = np.array([(p, r) for p in g for r in g if np.hypot(p, r) <= reach + 1e-9]) + (0.0 if k == 0 else centre)
+        t = t[np.hypot(t[:, 0], t[:, 1]) <= max_tilt_deg + 1e-9]
+        cand = tilted_poses(best, t, pivot_share * height_m)
+        half = shift_m[min(k, len(shift_m) - 1)]
+        offs = grid([0, 0, 0, 0, 0, 0], [half, half, 0, 0, 0, 0], [half / 2, half / 2, 1, 1, 1, 1])
+        cand = (cand[:, None, :] + offs[None]).reshape(-1, 6)
+        sc = score_poses(views, rois, cand, a, b, kernel).sum(axis=0)
+        best = cand[int(np.argmax(sc))].copy()
+        centre = best[4:6].copy()
+    return best
+
+
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
               radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
-              hypotheses: str = "grid", progress=None) -> PoseResult | None:
+              hypotheses: str = "grid", max_tilt_deg: float = 5.0, progress=None) -> PoseResult | None:
     """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m.
     First poses: with ``hypotheses="triangles"`` the method's MatchByTriangles (P3P, merged across
     photos, the best of four quarter turns); with ``"grid"``, or where the triangles give no pose
@@ -390,7 +435,9 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     cells) and a finer one around the best candidates (8 px). Then the method's MatchSeparate on
     4 px cells: in each photo the best rotation, then the best translation, on grids within the
     current MADs, merged across photos by MAD-weighted medians; a joint search (summed over
-    photos) within them; last the continuous refinement on the segments (``refine_on_segments``)."""
+    photos) within them; last the continuous refinement on the segments (``refine_on_segments``).
+    Between the first poses and MatchSeparate, the tilt up to ``max_tilt_deg`` (``search_tilt``):
+    the method's search holds a tower upright."""
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     period = min(symmetry_deg, 360.0)
     step = (lambda *_: None) if progress is None else progress
@@ -401,7 +448,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         return None
     start = None
     if hypotheses == "triangles":  # the method's MatchByTriangles; the exhaustive search where it finds nothing
-        start = match_by_triangles(vB, rB, c0, ground, a, b, height_m, period, radius_m, kernel, min_score)
+        start = match_by_triangles(vB, rB, c0, ground, a, b, height_m, period, radius_m, kernel, min_score,
+                                   max_tilt_deg=max_tilt_deg + 1.0)
         step("triangles")
     if start is not None:
         best = start[0]
@@ -436,10 +484,15 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
         step("fine")
         shares = _shares(vB, rB, best, a, b, kernel)
+    if max_tilt_deg > 0 and float(shares.mean()) >= min_score / 2:  # a lean costs an upright fit half its cells at most
+        best = search_tilt(vB, rB, best, a, b, height_m, max_tilt_deg, kernel)
+        shares = _shares(vB, rB, best, a, b, kernel)
+        step("tilt")
     if float(shares.mean()) < min_score:  # no pylon of this type here: skip the fine stages
         return PoseResult(best, float(shares.mean()), np.full(4, np.nan), len(vB), shares)
     # C: MatchSeparate on 4 px cells, per photo, merged
-    vC, rC = _rois(views, best[:3], extent + 1.5, height_m, 4, mode)
+    lean_m = height_m * np.sin(np.radians(tilt_of(best)[0] + 0.5))  # the top's offset from over the base
+    vC, rC = _rois(views, best[:3], extent + 1.5 + lean_m, height_m, 4, mode)
     mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
     pose = best.copy()
     rays = np.array([pose[:3] + [0, 0, height_m / 2] - v.centre for v in vC])
@@ -474,7 +527,7 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         pose = rot[int(np.argmax(sc))].copy()
     step("joint")
     # E: A_s stops at its 4 px cells; the segments themselves carry the pose to a fraction of a pixel
-    refined, n_edge, rms, share = refine_on_segments(vC, pose, a, b)
+    refined, n_edge, rms, share = refine_on_segments(vC, pose, a, b, extent_m=extent + lean_m)
     if np.all(np.abs(refined[:3] - pose[:3]) <= 0.5) and np.all(np.abs(refined[3:] - pose[3:]) <= 1.0):
         pose = refined
     per = _shares(vC, rC, pose, a, b, kernel)
@@ -711,7 +764,7 @@ class SegmentIndex:
 def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, radii_px=(6.0, 4.0, 3.0),
                        step_px: float = 4.0, angle_deg: float = 5.0, f_scale_px: float = 1.0,
                        tilt_grid_deg=(0.6, 0.2), count_radius_px: float = 2.0,
-                       max_rematch: int = 4):
+                       max_rematch: int = 4, extent_m: float | None = None):
     """Continuous refinement of a pose (x, y, z, heading, pitch, roll) against the photos' segments,
     past the resolution of the A_s cells: points every ``step_px`` along each projected beam are
     matched to the nearest segment of the beam's direction on either side (a beam wider than a
@@ -719,8 +772,8 @@ def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, ra
     to the midlines of their edge pairs over all photos (robust Huber loss, ``f_scale_px``).
     Matching and solving alternate (up to ``max_rematch`` times per radius, until the pairs hold
     still) with the search radius shrinking through ``radii_px``. Then the tilts of
-    ``tilt_grid_deg`` (± half, step; pylons stand within half a degree of upright) are tried at the
-    solved position and heading, and the one holding the most edge pairs is solved again. The
+    ``tilt_grid_deg`` (± half, step) about the solved tilt are tried at the solved position and
+    heading, and the one holding the most edge pairs is solved again. The
     solution with the most edge pairs within ``count_radius_px`` wins (the start if none beats it).
     Returns (pose, beam points matched to edge pairs at the last radius, their RMS distance in
     pixels, their share of the beam points in view)."""
@@ -728,7 +781,7 @@ def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, ra
 
     pose = np.asarray(pose, float).copy()
     height = float(max(a[:, 2].max(), b[:, 2].max()))
-    extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
+    extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max())) if extent_m is None else extent_m
     box = column_corners(pose[:3], extent + 1, height + 1)
     data = []
     for v in views:
@@ -790,7 +843,7 @@ def refine_on_segments(views, pose: np.ndarray, a: np.ndarray, b: np.ndarray, ra
         # (the top's beams caught by their neighbours); edge pairs within count_radius_px over a grid of
         # tilts tell them apart
         tilts = np.arange(-tilt_grid_deg[0], tilt_grid_deg[0] + 1e-9, tilt_grid_deg[1])
-        cands = [np.r_[best[:4], tp, tr] for tp in tilts for tr in tilts]
+        cands = [np.r_[best[:4], best[4] + tp, best[5] + tr] for tp in tilts for tr in tilts]
         counts = [count(g, 2 * step_px) for g in cands]
         x, n = solve(cands[int(np.argmax(counts))], radii_px[1:])
         if n > n_best:

@@ -71,7 +71,9 @@ def _pylons(params, ctx):
     if not crs.is_projected:
         raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
     s = make_pylon_survey(params["seed"], params["n_pylons"], params["photos_per_pylon"], params["span_m"] or 150.0,
-                          (params["origin_x"], params["origin_y"]), params["crs"], slope_pct=params["slope_pct"])
+                          (params["origin_x"], params["origin_y"]), params["crs"], slope_pct=params["slope_pct"],
+                          lean_deg=params["lean_deg"], lean_share=params["lean_share"],
+                          lean_direction=params["lean_direction"])
     files = survey_files(s, progress=ctx.progress)
     dem = Raster(s.dem, s.dem_transform, crs=crs, nodata=float("nan"), style="dtm",
                  description="terrain heights of the photo survey (cell centres)")
@@ -79,7 +81,8 @@ def _pylons(params, ctx):
         outputs={"points": None, "truth": None, "truth_json": s.truth(), "dtm": None, "dem": dem, "survey": files},
         stats={"kind": "pylons", "seed": s.seed, "n_pylons": len(s.pylons), "n_photos": len(s.shots),
                "span_m_used": params["span_m"] or 150.0, "width_m_used": None, "height_m_used": None,
-               "pylon_types": sorted({p.model for p in s.pylons})})
+               "pylon_types": sorted({p.model for p in s.pylons}),
+               "n_leaning": sum(s.truth()["pylons"][i]["tilt_deg"] > 0.5 for i in range(len(s.pylons)))})
 
 
 @toolbox.hookimpl
@@ -148,6 +151,12 @@ def toolbox_algorithms():
                       "symmetric) and U-110 (asymmetric top)", minimum=1, maximum=12),
             Parameter("photos_per_pylon", int, 12, "pylons: photos of each pylon from 100-150 m, a sixth of them "
                       "nadir, the rest oblique (35-70° elevation) all round", minimum=3, maximum=60),
+            Parameter("lean_deg", float, 0.0, "pylons: the tilt of the leaning pylons (a foundation failure, a "
+                      "storm); the others stand within 0.3° of upright", unit="deg", minimum=0.0, maximum=10.0),
+            Parameter("lean_share", float, 0.34, "pylons: the share of the pylons that lean by lean_deg, the middle "
+                      "ones first (at least one when above 0)", minimum=0.0, maximum=1.0),
+            Parameter("lean_direction", str, "random", "pylons: where the leaning pylons' tops lean: along the "
+                      "line, across it, or random", choices=("random", "along", "across")),
             Parameter("roof_set", str, "basic", "roofs: the buildings (basic: gable, hip, hip with a dormer, flat; all: "
                       "also pyramid, shed, mansard, gambrel, L, T, cross and flat roofs with a parapet, crowns over "
                       "some eaves, on a 300 x 220 m scene)", choices=("basic", "all")),
@@ -161,7 +170,8 @@ def toolbox_algorithms():
             Output("truth_json", "json", "the same truth as JSON, with class counts and scene parameters", suffix="_truth"),
             Output("dtm", "raster", "true bare-earth DTM", style="dtm"),
             Output("dem", "raster", "kind=pylons: the terrain heights under the photo survey", style="dtm", suffix="_dem"),
-            Output("survey", "folder", "kind=pylons: photos/ (JPEG), colmap/ (COLMAP text model), cameras.xml (the "
-                   "same cameras as a Metashape XML), models/*.obj (each pylon type's beams), in the output folder"),
+            Output("survey", "folder", "kind=pylons: photos/ (JPEG), colmap/ (COLMAP text model), colmap_bin/ (the "
+                   "same, binary), cameras.xml (the same cameras as a Metashape XML), models/*.obj (each pylon type's "
+                   "beams), in the output folder"),
         ],
     )]

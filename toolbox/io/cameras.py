@@ -1,5 +1,5 @@
-"""Cameras of an aligned photo set: the COLMAP text model (cameras.txt, images.txt), read and
-written here so that every photo plugin reads cameras the same way.
+"""Cameras of an aligned photo set: a COLMAP model (binary or text, through pycolmap) or a
+Metashape camera XML, read and written here so that every photo plugin reads cameras the same way.
 
 World convention (one for the whole toolbox): x east, y north, z up, in the CRS of the DEM the
 photos come with, i.e. a georeferenced COLMAP model. A camera maps a world point to camera
@@ -109,86 +109,108 @@ def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
     return -q if w < 0 else q
 
 
-def _lines(path: Path):
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DataError(f"camera model {str(path.parent)!r} has no {path.name}; give the folder of a COLMAP text "
-                        "model (cameras.txt, images.txt)") from None
-    except UnicodeDecodeError:
-        raise DataError(f"{str(path)!r} is not a text file; export the COLMAP model as text "
-                        "(colmap model_converter --output_type TXT)") from None
-    for no, line in enumerate(text.splitlines(), 1):
-        s = line.strip()
-        if s and not s.startswith("#"):
-            yield no, s
+# COLMAP's model folder in either of its forms (COLMAP writes binary by default), each with its two
+# files that matter here; points3D is not used
+COLMAP_FORMS = {"binary": ("cameras.bin", "images.bin"), "text": ("cameras.txt", "images.txt")}
 
 
-def read_colmap_text(folder) -> tuple[dict[int, Camera], dict[int, Image]]:
-    """Cameras and images of a COLMAP text model folder; one-line DataError naming the file and
-    line for anything it cannot read."""
+def colmap_form(folder) -> str:
+    """``binary`` or ``text``: the form of the COLMAP model in ``folder`` (binary where both are)."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise DataError(f"camera model {str(folder)!r} is not a folder; give the folder holding cameras.txt and "
-                        "images.txt")
+        raise DataError(f"camera model {str(folder)!r} is not a folder; give the folder of a COLMAP model "
+                        "(cameras.bin, images.bin or cameras.txt, images.txt)")
+    for form, names in COLMAP_FORMS.items():
+        if all((folder / n).is_file() for n in names):
+            return form
+    have = [n for names in COLMAP_FORMS.values() for n in names if (folder / n).is_file()]
+    if have:
+        form = "binary" if have[0].endswith(".bin") else "text"
+        missing = [n for n in COLMAP_FORMS[form] if n not in have][0]
+        raise DataError(f"camera model {str(folder)!r} has {have[0]} but no {missing}; give the whole COLMAP model folder")
+    raise DataError(f"camera model {str(folder)!r} has no COLMAP model (cameras.bin, images.bin or cameras.txt, "
+                    "images.txt); give the folder COLMAP wrote (sparse/0)")
+
+
+def _colmap_error(folder, form: str, err: Exception, read_from: str) -> DataError:
+    """pycolmap's messages in the user's terms: which folder, what is wrong, what to do."""
+    import re
+
+    text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    msg = re.sub(r"^\[[^\]]*\]\s*", "", text).replace(read_from, str(folder))
+    cams, imgs = COLMAP_FORMS[form]
+    m = re.search(r"Rig with ID (\d+) does not exist", msg)
+    rigs = "rigs.bin" if form == "binary" else "rigs.txt"
+    if m and not (Path(folder) / rigs).exists():  # a model without rigs gets one per camera, same id
+        what = f"an image in {imgs} uses camera {m.group(1)}, which {cams} lacks"
+    elif "VerifyParams" in msg:
+        what = f"a camera in {cams} has the wrong number of parameters for its model"
+    elif "Camera model does not exist" in msg:
+        what = f"a camera in {cams} has a model COLMAP does not know"
+    else:
+        what = f"COLMAP cannot read it, it is damaged or not a COLMAP model (pycolmap: {msg})"
+    return DataError(f"camera model {str(folder)!r} ({form}): {what}; export the model again from COLMAP "
+                     "(colmap model_converter)")
+
+
+def read_colmap(folder) -> tuple[dict[int, Camera], dict[int, Image]]:
+    """Cameras and posed images of a COLMAP model folder, binary or text, read by pycolmap; one-line
+    DataError naming the folder for anything it cannot read. Images without a pose (not
+    registered) are left out: nothing can be measured in them."""
+    import os
+    import tempfile
+
+    import pycolmap
+
+    folder = Path(folder)
+    form = colmap_form(folder)
+    rec = pycolmap.Reconstruction()
+    ext = ".bin" if form == "binary" else ".txt"
+    with tempfile.TemporaryDirectory() as tmp:
+        # the model without its 3D points, which nothing here uses (millions in a real model, and
+        # often not shipped with the cameras): links to the rest beside an empty points3D
+        for name in ("cameras", "images", "rigs", "frames"):
+            if (folder / f"{name}{ext}").is_file():
+                os.symlink((folder / f"{name}{ext}").resolve(), Path(tmp) / f"{name}{ext}")
+        (Path(tmp) / f"points3D{ext}").write_bytes(bytes(8) if form == "binary" else b"")
+        try:
+            (rec.read_binary if form == "binary" else rec.read_text)(tmp)
+        except Exception as err:  # pycolmap raises ValueError, IndexError, RuntimeError for bad files
+            raise _colmap_error(folder, form, err, tmp) from None
     cameras: dict[int, Camera] = {}
-    for no, s in _lines(folder / "cameras.txt"):
-        f = s.split()
-        where = f"{folder / 'cameras.txt'}:{no}"
-        if len(f) < 4:
-            raise DataError(f"{where}: a camera line needs CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]")
-        model = f[1].upper()
+    for cid, c in rec.cameras.items():
+        model = c.model.name
         if model not in MODELS:
-            raise DataError(f"{where}: camera model {f[1]!r} is not supported; use one of {', '.join(MODELS)} "
-                            "(colmap image_undistorter gives PINHOLE)")
-        try:
-            params = tuple(float(v) for v in f[4:])
-            cam = Camera(int(f[0]), model, int(f[2]), int(f[3]), params)
-        except ValueError:
-            raise DataError(f"{where}: not a number in {s!r}") from None
-        if len(params) != len(MODELS[model]):
-            raise DataError(f"{where}: {model} takes {len(MODELS[model])} parameters "
-                            f"({', '.join(MODELS[model])}), the line has {len(params)}")
-        cameras[cam.id] = cam
+            raise DataError(f"camera model {str(folder)!r}: camera {cid} is {model}, which is not supported; use one of "
+                            f"{', '.join(MODELS)} (colmap image_undistorter gives PINHOLE)")
+        cameras[cid] = Camera(int(cid), model, int(c.width), int(c.height), tuple(float(v) for v in c.params))
     images: dict[int, Image] = {}
-    for no, s in _lines(folder / "images.txt"):
-        # images.txt alternates a pose line and a line of 2D points (X Y POINT3D_ID triples, maybe
-        # empty); a points line ends in a number, a pose line in the photo's file name
-        f = s.split()
-        try:
-            float(f[-1])
+    for iid, im in rec.images.items():
+        if not im.has_pose:
             continue
-        except ValueError:
-            pass
-        where = f"{folder / 'images.txt'}:{no}"
-        if len(f) < 10:
-            raise DataError(f"{where}: an image line needs IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME")
-        try:
-            img = Image(int(f[0]), " ".join(f[9:]), int(f[8]), np.array(f[1:5], float), np.array(f[5:8], float))
-        except ValueError:
-            raise DataError(f"{where}: not a number in {s!r}") from None
-        if img.camera_id not in cameras:
-            raise DataError(f"{where}: image {img.name!r} uses camera {img.camera_id}, which cameras.txt lacks")
-        images[img.id] = img
+        pose = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world  # a method since 3.12
+        x, y, z, w = np.asarray(pose.rotation.quat, np.float64)
+        images[int(iid)] = Image(int(iid), im.name, int(im.camera_id), np.array([w, x, y, z]),
+                                 np.asarray(pose.translation, np.float64).copy())
+    if not images:
+        raise DataError(f"camera model {str(folder)!r} has no posed image; give a model COLMAP has aligned")
     return cameras, images
 
 
-def write_colmap_text(folder, cameras, images) -> None:
-    """Write cameras.txt, images.txt and an empty points3D.txt into ``folder`` (which must exist)."""
-    folder = Path(folder)
-    cam_lines = ["# Camera list with one line of data per camera:",
-                 "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]"]
+def write_colmap(folder, cameras, images, binary: bool = False) -> None:
+    """Write a COLMAP model (binary: *.bin, COLMAP's default; else text) into ``folder`` (which
+    must exist), through pycolmap."""
+    import pycolmap
+
+    rec = pycolmap.Reconstruction()
     for c in cameras.values() if isinstance(cameras, dict) else cameras:
-        cam_lines.append(" ".join([str(c.id), c.model, str(c.width), str(c.height)] + [repr(float(p)) for p in c.params]))
-    img_lines = ["# Image list with two lines of data per image:",
-                 "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
-                 "#   POINTS2D[] as (X, Y, POINT3D_ID)"]
+        rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=c.id, model=c.model, width=c.width, height=c.height,
+                                                        params=[float(p) for p in c.params]))
     for i in images.values() if isinstance(images, dict) else images:
-        img_lines.append(" ".join([str(i.id)] + [repr(float(v)) for v in (*i.qvec, *i.tvec)] + [str(i.camera_id), i.name]))
-        img_lines.append("")
-    (folder / "cameras.txt").write_text("\n".join(cam_lines) + "\n", encoding="utf-8")
-    (folder / "images.txt").write_text("\n".join(img_lines) + "\n", encoding="utf-8")
-    (folder / "points3D.txt").write_text("# 3D point list (empty)\n", encoding="utf-8")
+        w, x, y, z = np.asarray(i.qvec, np.float64) / np.linalg.norm(i.qvec)
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(np.array([x, y, z, w])), np.asarray(i.tvec, np.float64))
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=i.name, camera_id=i.camera_id, image_id=i.id), pose)
+    (rec.write_binary if binary else rec.write_text)(str(folder))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -371,12 +393,12 @@ def write_metashape_xml(path, camera: Camera, images, crs: str, scale: float = 1
 
 
 def read_cameras(path, crs=None) -> tuple[dict[int, Camera], dict[int, Image]]:
-    """A COLMAP text model folder or a Metashape camera XML."""
+    """A COLMAP model folder (binary or text) or a Metashape camera XML."""
     p = Path(path)
     if p.is_dir():
-        return read_colmap_text(p)
+        return read_colmap(p)
     if p.suffix.lower() == ".xml":
         return read_metashape_xml(p, crs)
     if not p.exists():
-        raise DataError(f"cameras {str(p)!r} do not exist; give a COLMAP text model folder or a Metashape camera XML")
-    raise DataError(f"cameras {str(p)!r}: not a folder (COLMAP text model) nor a .xml (Metashape camera XML)")
+        raise DataError(f"cameras {str(p)!r} do not exist; give a COLMAP model folder or a Metashape camera XML")
+    raise DataError(f"cameras {str(p)!r}: not a folder (COLMAP model) nor a .xml (Metashape camera XML)")

@@ -95,6 +95,8 @@ class PhotoSurvey:
                                "angles counter-clockwise, degrees; heading 0: the model's x axis points east",
                 "pylons": [{"x": p.x, "y": p.y, "z": p.z, "heading_deg": p.heading_deg, "roll_deg": p.roll_deg,
                             "pitch_deg": p.pitch_deg, "model": p.model,
+                            "tilt_deg": round(tilt_of(p.heading_deg, p.pitch_deg, p.roll_deg)[0], 6),
+                            "tilt_azimuth_deg": round(tilt_of(p.heading_deg, p.pitch_deg, p.roll_deg)[1], 6),
                             "symmetry_deg": self.models[p.model].symmetry_deg} for p in self.pylons],
                 "photos": [{"name": s.name, "pylon": s.target} for s in self.shots],
                 "camera": {"model": "OPENCV", "width": self.camera[0], "height": self.camera[1],
@@ -115,9 +117,48 @@ def _look_at(centre, target, roll_deg=0.0, up=(0.0, 0.0, 1.0)):
     return R, -R @ centre
 
 
+def tilt_of(heading_deg, pitch_deg, roll_deg) -> tuple[float, float]:
+    """(tilt, azimuth) of a pose's vertical axis: its angle from the plumb line and the compass
+    direction (degrees clockwise from grid north) its top leans toward."""
+    up = rotation(heading_deg, pitch_deg, roll_deg)[:, 2]
+    return (float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))),
+            float(np.degrees(np.arctan2(up[0], up[1])) % 360.0))
+
+
+def lean_angles(heading_deg: float, tilt_deg: float, toward_deg: float) -> tuple[float, float]:
+    """(pitch, roll) that tilt a pylon of ``heading_deg`` by ``tilt_deg`` with its top toward
+    ``toward_deg`` (counter-clockwise from east, the toolbox's angles): the model's vertical axis
+    Rz(heading)·Ry(pitch)·Rx(roll)·z made equal to that direction."""
+    t, a = np.radians([tilt_deg, toward_deg])
+    axis = rotation(heading_deg, 0.0, 0.0).T @ [np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)]
+    # Ry(p)·Rx(r)·z = (sin p cos r, -sin r, cos p cos r)
+    return float(np.degrees(np.arctan2(axis[0], axis[2]))), float(np.degrees(np.arcsin(-axis[1])))
+
+
+def _lean(pylons, line_dir_deg: float, lean_deg: float, lean_share: float, lean_direction: str, seed: int):
+    """Tilts ``lean_share`` of the pylons (at least one when the share is above 0) by exactly
+    ``lean_deg``, the top toward the line (along), square to it (across) or anywhere (random);
+    its own random stream, so that a survey without leaning pylons is the one it always was."""
+    if lean_deg <= 0 or lean_share <= 0:
+        return
+    rng = np.random.default_rng(seed + 104729)
+    n = min(len(pylons), max(1, int(round(lean_share * len(pylons)))))
+    # the middle ones first: a leaning pylon with upright neighbours, as an inspection meets it
+    order = sorted(range(len(pylons)), key=lambda i: (abs(i - (len(pylons) - 1) / 2), rng.uniform()))
+    for i in sorted(order[:n]):
+        p = pylons[i]
+        toward = {"along": line_dir_deg, "across": line_dir_deg + 90.0}.get(lean_direction, rng.uniform(0, 360))
+        toward += 180.0 * (rng.uniform() < 0.5)
+        p.pitch_deg, p.roll_deg = (round(v, 6) for v in lean_angles(p.heading_deg, lean_deg, toward))
+
+
 def make_pylon_survey(seed: int = 1, n_pylons: int = 3, photos_per_pylon: int = 12, span_m: float = 150.0,
                       origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", image_size=(2400, 1600),
-                      distance_m=(100.0, 150.0), slope_pct: float = 0.0) -> PhotoSurvey:
+                      distance_m=(100.0, 150.0), slope_pct: float = 0.0, lean_deg: float = 0.0, lean_share: float = 0.0,
+                      lean_direction: str = "random") -> PhotoSurvey:
+    """A photo survey of ``n_pylons`` along a line; ``lean_share`` of them (the middle ones) lean
+    by ``lean_deg`` toward ``lean_direction`` (along, across the line or random), the others
+    stand within 0.3° of upright."""
     rng = np.random.default_rng(seed)
     models = builtin_models()
     line_len = span_m * (n_pylons - 1)
@@ -138,6 +179,7 @@ def make_pylon_survey(seed: int = 1, n_pylons: int = 3, photos_per_pylon: int = 
         pylons.append(Pylon(name, float(origin[0] + uv[0]), float(origin[1] + uv[1]),
                             float(terrain.height(uv[0], uv[1])), round(float(heading), 3),
                             round(float(rng.uniform(-0.3, 0.3)), 3), round(float(rng.uniform(-0.3, 0.3)), 3)))
+    _lean(pylons, line_dir, lean_deg, lean_share, lean_direction, seed)
     w, h = image_size
     f = 1.02 * w  # a 53° wide lens, like a 24 mm on full frame
     camera = (w, h, (round(f, 2), round(f * 1.0004, 2), round(w / 2 + rng.uniform(-8, 8), 2),
@@ -380,12 +422,12 @@ def _shadow_on_ground(s: PhotoSurvey, X: np.ndarray) -> np.ndarray:
 
 def survey_files(s: PhotoSurvey, progress=lambda it, **kw: it, workers: int = 2) -> dict:
     """The survey as files ({relative path: bytes or text}): photos/*.JPG, a COLMAP text model in
-    colmap/, the same cameras as a Metashape XML (cameras.xml), each pylon type as models/*.obj."""
+    colmap/ and the same as a binary model in colmap_bin/, the same cameras as a Metashape XML (cameras.xml), each pylon type as models/*.obj."""
     import tempfile
     from concurrent.futures import ThreadPoolExecutor
     from pathlib import Path
 
-    from toolbox.io.cameras import Camera, Image, quaternion_from_matrix, write_colmap_text, write_metashape_xml
+    from toolbox.io.cameras import Camera, Image, quaternion_from_matrix, write_colmap, write_metashape_xml
 
     rng = np.random.default_rng(s.seed + 7919)
     ortho = ortho_texture(s, rng)
@@ -400,9 +442,11 @@ def survey_files(s: PhotoSurvey, progress=lambda it, **kw: it, workers: int = 2)
         for sh, fut in zip(s.shots, progress(futs, total=len(futs), desc="photos", unit="photo")):
             files[f"photos/{sh.name}"] = fut.result()
     with tempfile.TemporaryDirectory() as tmp:
-        write_colmap_text(tmp, {1: cam}, images)
-        for name in ("cameras.txt", "images.txt", "points3D.txt"):
-            files[f"colmap/{name}"] = (Path(tmp) / name).read_text(encoding="utf-8")
+        for sub, binary in (("colmap", False), ("colmap_bin", True)):  # the text model and COLMAP's default
+            (Path(tmp) / sub).mkdir()
+            write_colmap(Path(tmp) / sub, {1: cam}, images, binary=binary)
+            for f in sorted((Path(tmp) / sub).iterdir()):
+                files[f"{sub}/{f.name}"] = f.read_bytes() if binary else f.read_text(encoding="utf-8")
         write_metashape_xml(Path(tmp) / "cameras.xml", cam, images, s.crs, scale=0.8)
         files["cameras.xml"] = (Path(tmp) / "cameras.xml").read_text(encoding="utf-8")
         for name, m in s.models.items():
