@@ -6,6 +6,7 @@ Prints candidate poses scored per second by each, the ratio, and whether the sco
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -79,76 +80,115 @@ def _timed(fn):
     return time.perf_counter() - t, out
 
 
-def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10, perturbed=((2, 0.05, 0.05),),
-                 hypotheses=("grid", "triangles")) -> list[dict]:
+def _score(d: Path, out: Path, label: str, how: str) -> tuple[list[dict], int, int, int]:
+    """Per truth pylon the errors of the found one (within 2 m): xy, z, heading, tilt (the angle
+    between the found and the true vertical axes), the tilt's size; (rows, matched, false, truth)."""
+    import json
+
+    import geopandas as gpd
+
+    from toolbox_plugins.pylon_pose.core import rotation
+
+    truth = json.loads((d / "points_truth.json").read_text())["pylons"]
+    got = gpd.read_file(out, layer="pylons")
+    rows, matched = [], 0
+    for p in truth:
+        dist = np.hypot(got.geometry.x - p["x"], got.geometry.y - p["y"]) if len(got) else np.array([np.inf])
+        i = int(np.argmin(dist))
+        if dist[i] > 2.0:
+            print(f"  {label} {how} {p['model']}: MISSED", flush=True)
+            continue
+        matched += 1
+        r, sym = got.iloc[i], p["symmetry_deg"]
+        dh = (r.heading_deg - p["heading_deg"] + sym / 2) % sym - sym / 2
+        # a symmetric type found 180 degrees round has pitch and roll of the opposite sign, and the same axis
+        up = [rotation(h_, p_, r_)[:, 2] for h_, p_, r_ in ((r.heading_deg, r.pitch_deg, r.roll_deg),
+                                                             (p["heading_deg"], p["pitch_deg"], p["roll_deg"]))]
+        tilt = float(np.degrees(np.arccos(np.clip(up[0] @ up[1], -1.0, 1.0))))
+        rows.append({"model": p["model"], "found_as": r.model, "xy_m": float(dist[i]), "z_m": float(r.geometry.z - p["z"]),
+                     "heading_deg": float(dh), "tilt_deg": tilt, "true_tilt_deg": p["tilt_deg"],
+                     "found_tilt_deg": float(r.tilt_deg), "leaning": bool(r.leaning), "score": float(r.score),
+                     "rms_px": float(r.rms_px), "pose": [float(r.geometry.x), float(r.geometry.y), float(r.geometry.z),
+                                                         float(r.heading_deg), float(r.pitch_deg), float(r.roll_deg)]})
+        print(f"  {label} {how} {p['model']:5s} (as {r.model}) leaning {p['tilt_deg']:.2f} deg: xy {dist[i]:.3f} m, "
+              f"z {rows[-1]['z_m']:+.3f} m, heading {dh:+.3f} deg, tilt error {tilt:.3f} deg (found {r.tilt_deg:.2f}, "
+              f"{'leaning' if r.leaning else 'upright'}), score {r.score:.3f}, rms {r.rms_px:.2f} px", flush=True)
+    return rows, matched, len(got) - matched, len(truth)
+
+
+# (seed, lean_deg, lean_direction): the leaning surveys of #79, the middle pylon of three leaning
+LEANING = ((6, 2.5, "across"), (8, 5.0, "along"), (10, 1.0, "random"))
+
+
+def bench_search(seeds=(2, 3, 4), n_pylons: int = 3, photos_per_pylon: int = 10,
+                 perturbed=((2, 0.05, 0.05), (2, 0.1, 0.1)), hypotheses=("grid", "triangles"), leaning=LEANING,
+                 upright_peer: bool = True, binary_check: bool = True) -> list[dict]:
     """The whole pylon-pose run on synthetic photo surveys the tests do not use, once per way of
     making the first hypotheses (``hypotheses``): per pylon the position, height, heading and tilt
     errors against the truth, false pylons, seconds per photo.
     ``perturbed``: (seed, metres, degrees) runs whose COLMAP cameras carry an alignment's error, each
-    centre moved and each orientation turned by exactly that much in a random direction."""
-    import json
+    centre moved and each orientation turned by exactly that much in a random direction.
+    ``leaning``: (seed, degrees, direction) surveys whose middle pylon leans (grid hypotheses).
+    ``upright_peer``: each upright survey also with ``max_tilt_deg=0`` (the method's upright
+    search, the search before #79): seconds per photo of both and the ratio, same run.
+    ``binary_check``: the first seed also from its binary COLMAP model: the largest pose difference."""
     import tempfile
-    from pathlib import Path
-
-    import geopandas as gpd
-
-    from toolbox.runner import run_algorithm
-    from toolbox_plugins.pylon_pose.core import rotation
 
     from toolbox.io.cameras import read_colmap, write_colmap
+    from toolbox.runner import run_algorithm
     from toolbox_plugins.synthetic_scene.generator.pylons import perturb_images
 
     rows = []
-    for seed, shift_m, turn_deg in [(s_, 0.0, 0.0) for s_ in seeds] + list(perturbed):
+    runs = [(s_, 0.0, 0.0, 0.0, "random") for s_ in seeds] + [(s_, m, d_, 0.0, "random") for s_, m, d_ in perturbed]
+    runs += [(s_, 0.0, 0.0, lean, direction) for s_, lean, direction in leaning]
+    for seed, shift_m, turn_deg, lean, direction in runs:
         with tempfile.TemporaryDirectory() as tmp:
             d = Path(tmp)
             run_algorithm("synthetic-scene", [], d, {"kind": "pylons", "seed": seed, "n_pylons": n_pylons,
-                                                     "photos_per_pylon": photos_per_pylon})
+                                                     "photos_per_pylon": photos_per_pylon, "lean_deg": lean,
+                                                     "lean_share": 0.34 if lean else 0.0, "lean_direction": direction})
             cams = d / "colmap"
-            label = f"seed {seed}"
+            label = f"seed {seed}" + (f" leaning {lean} deg {direction}" if lean else "")
             if shift_m or turn_deg:
                 cameras, images = read_colmap(cams)
                 cams = d / "colmap_perturbed"
                 cams.mkdir()
                 write_colmap(cams, cameras, perturb_images(images, shift_m, turn_deg, seed=seed))
                 label = f"seed {seed} cameras off {shift_m} m {turn_deg} deg"
-            for how in hypotheses:
+            ways = [(h, {"hypotheses": h}, cams) for h in (hypotheses if not lean else ("grid",))]
+            if upright_peer and not lean and not shift_m:
+                ways.append(("grid upright", {"hypotheses": "grid", "max_tilt_deg": 0.0}, cams))
+            if binary_check and seed == seeds[0] and not lean and not shift_m:
+                ways.append(("grid binary", {"hypotheses": "grid"}, d / "colmap_bin"))
+            found, per_photo = {}, {}
+            for how, params, cam_dir in ways:
+                out = d / f"found_{how.replace(' ', '_')}.gpkg"
                 t0 = time.perf_counter()
-                rep = run_algorithm("pylon-pose", {"photos": str(d / "photos"), "cameras": str(cams),
-                                                   "dem": str(d / "points_dem.tif")}, d / f"found_{how}.gpkg",
-                                    {"hypotheses": how})
+                rep = run_algorithm("pylon-pose", {"photos": str(d / "photos"), "cameras": str(cam_dir),
+                                                   "dem": str(d / "points_dem.tif")}, out, params)
                 secs = time.perf_counter() - t0
-                truth = json.loads((d / "points_truth.json").read_text())["pylons"]
-                got = gpd.read_file(d / f"found_{how}.gpkg", layer="pylons")
-                matched = 0
-                for p in truth:
-                    dist = np.hypot(got.geometry.x - p["x"], got.geometry.y - p["y"]) if len(got) else np.array([np.inf])
-                    i = int(np.argmin(dist))
-                    if dist[i] > 2.0:
-                        print(f"  {label} {how} {p['model']}: MISSED", flush=True)
-                        continue
-                    matched += 1
-                    r, sym = got.iloc[i], p["symmetry_deg"]
-                    dh = (r.heading_deg - p["heading_deg"] + sym / 2) % sym - sym / 2
-                    # tilt: the angle between the found and the true vertical axes of the model (a symmetric
-                    # type found 180 degrees round has pitch and roll of the opposite sign, and the same axis)
-                    up = [rotation(h_, p_, r_)[:, 2] for h_, p_, r_ in ((r.heading_deg, r.pitch_deg, r.roll_deg),
-                                                                         (p["heading_deg"], p["pitch_deg"], p["roll_deg"]))]
-                    tilt = float(np.degrees(np.arccos(np.clip(up[0] @ up[1], -1.0, 1.0))))
-                    row = {"case": "pylon-pose search", "seed": seed, "cameras_off_m": shift_m, "cameras_off_deg": turn_deg,
-                           "hypotheses": how, "model": p["model"], "found_as": r.model,
-                           "xy_m": float(dist[i]), "z_m": float(r.geometry.z - p["z"]), "heading_deg": float(dh),
-                           "tilt_deg": tilt, "score": float(r.score), "rms_px": float(r.rms_px)}
-                    rows.append(row)
-                    print(f"  {label} {how} {p['model']:5s} (as {r.model}): xy {row['xy_m']:.3f} m, z {row['z_m']:+.3f} m, "
-                          f"heading {dh:+.3f} deg, tilt {tilt:.3f} deg, score {r.score:.3f}, rms {r.rms_px:.2f} px", flush=True)
+                per, matched, false, n_truth = _score(d, out, label, how)
+                found[how] = per
                 n_photos = rep["stats"]["n_photos"]
-                print(f"  {label} {how}: {matched} of {len(truth)} pylons found, {len(got) - matched} false, "
+                per_photo[how] = secs / n_photos
+                for row in per:
+                    rows.append({"case": "pylon-pose search", "seed": seed, "cameras_off_m": shift_m,
+                                 "cameras_off_deg": turn_deg, "lean_deg": lean, "hypotheses": how, **row})
+                print(f"  {label} {how}: {matched} of {n_truth} pylons found, {false} false, "
                       f"{rep['stats'].get('n_candidates')} candidates; {secs:.1f} s for {n_photos} photos = "
                       f"{secs / n_photos:.2f} s per photo", flush=True)
-                rows.append({"case": "pylon-pose run", "seed": seed, "cameras_off_m": shift_m, "hypotheses": how,
-                             "found": matched, "truth": len(truth), "false": len(got) - matched,
-                             "s_per_photo": secs / n_photos})
+                rows.append({"case": "pylon-pose run", "seed": seed, "cameras_off_m": shift_m, "lean_deg": lean,
+                             "hypotheses": how, "found": matched, "false": false, "s_per_photo": secs / n_photos})
+            if "grid upright" in found:
+                ours, peer = per_photo["grid"], per_photo["grid upright"]
+                rows.append({"case": "pylon-pose tilt cost", "seed": seed, "s_per_photo": ours, "upright_s_per_photo": peer,
+                             "ratio": ours / peer})
+                print(f"  {label}: tilt searched {ours:.2f} s per photo, upright only {peer:.2f}: "
+                      f"{ours / peer:.2f}x", flush=True)
+            if "grid binary" in found:
+                diff = max((np.abs(np.subtract(p["pose"], q["pose"])).max() for p, q in zip(found["grid"], found["grid binary"])),
+                           default=float("nan"))
+                print(f"  {label}: binary and text COLMAP models, largest pose difference {diff:.2e}", flush=True)
     return rows
 
 

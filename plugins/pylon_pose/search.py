@@ -401,13 +401,14 @@ def tilted_poses(pose: np.ndarray, tilts: np.ndarray, pivot_m: float) -> np.ndar
 
 
 def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_deg: float, kernel=None,
-                steps_deg=(1.0, 0.25), shift_m=(0.5, 0.25), pivot_share: float = 0.4) -> np.ndarray:
+                steps_deg=(1.0, 0.25), shift_m=(1.0, 0.25), turn_deg=(3.0, 0.5), pivot_share: float = 0.4) -> np.ndarray:
     """A leaning pylon's tilt by A_s (the method searches an upright tower; its future work is
     this): pitch and roll on a grid of ``steps_deg[0]`` over the disc of ``max_tilt_deg``, then of
     ``steps_deg[1]`` within one coarse step of the best, each with the base moved to keep the
-    axis through ``pivot_share`` of the height and shifted ± ``shift_m`` on a grid of half that; the
-    pose summed best over the photos. The upright pose is one of the candidates, so an upright
-    tower keeps it unless a tilt matches better."""
+    axis through ``pivot_share`` of the height, then shifted ± ``shift_m`` and turned ±
+    ``turn_deg`` on grids of half that (an upright fit of a leaning tower compromises its
+    position and heading too); the pose summed best over the photos. The upright pose is one of
+    the candidates, so an upright tower keeps it unless a tilt matches better."""
     best = np.asarray(pose, float).copy()
     centre = best[4:6].copy()
     for k, step in enumerate(steps_deg):
@@ -416,8 +417,8 @@ def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_d
         t = np.array([(p, r) for p in g for r in g if np.hypot(p, r) <= reach + 1e-9]) + (0.0 if k == 0 else centre)
         t = t[np.hypot(t[:, 0], t[:, 1]) <= max_tilt_deg + 1e-9]
         cand = tilted_poses(best, t, pivot_share * height_m)
-        half = shift_m[min(k, len(shift_m) - 1)]
-        offs = grid([0, 0, 0, 0, 0, 0], [half, half, 0, 0, 0, 0], [half / 2, half / 2, 1, 1, 1, 1])
+        half, turn = shift_m[k], turn_deg[k]
+        offs = grid([0, 0, 0, 0, 0, 0], [half, half, 0, turn, 0, 0], [half / 2, half / 2, 1, turn / 2, 1, 1])
         cand = (cand[:, None, :] + offs[None]).reshape(-1, 6)
         sc = score_poses(views, rois, cand, a, b, kernel).sum(axis=0)
         best = cand[int(np.argmax(sc))].copy()

@@ -65,15 +65,15 @@ def _pylons(params, ctx):
     from toolbox.io.points import parse_crs
     from toolbox.io.rasters import Raster
 
-    from .generator.pylons import make_pylon_survey, survey_files
+    from .generator.pylons import leaning_pylons, make_pylon_survey, survey_files
 
     crs = parse_crs(params["crs"])
     if not crs.is_projected:
         raise UsageError(f"synthetic-scene: crs {params['crs']!r} is not a projected CRS in metres; use e.g. EPSG:25832")
     s = make_pylon_survey(params["seed"], params["n_pylons"], params["photos_per_pylon"], params["span_m"] or 150.0,
                           (params["origin_x"], params["origin_y"]), params["crs"], slope_pct=params["slope_pct"],
-                          lean_deg=params["lean_deg"], lean_share=params["lean_share"],
-                          lean_direction=params["lean_direction"])
+                          leans=leaning_pylons(params["n_pylons"], params["lean_deg"], params["lean_share"],
+                                               params["lean_direction"], params["seed"]))
     files = survey_files(s, progress=ctx.progress)
     dem = Raster(s.dem, s.dem_transform, crs=crs, nodata=float("nan"), style="dtm",
                  description="terrain heights of the photo survey (cell centres)")

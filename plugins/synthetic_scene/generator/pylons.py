@@ -135,30 +135,36 @@ def lean_angles(heading_deg: float, tilt_deg: float, toward_deg: float) -> tuple
     return float(np.degrees(np.arctan2(axis[0], axis[2]))), float(np.degrees(np.arcsin(-axis[1])))
 
 
-def _lean(pylons, line_dir_deg: float, lean_deg: float, lean_share: float, lean_direction: str, seed: int):
-    """Tilts ``lean_share`` of the pylons (at least one when the share is above 0) by exactly
-    ``lean_deg``, the top toward the line (along), square to it (across) or anywhere (random);
-    its own random stream, so that a survey without leaning pylons is the one it always was."""
-    if lean_deg <= 0 or lean_share <= 0:
-        return
+def _lean(pylons, line_dir_deg: float, leans, seed: int):
+    """Tilts the pylons that ``leans`` names ({index: (tilt_deg, along | across | random)}) by
+    exactly that much, the top toward the line (along), square to it (across) or anywhere; its own
+    random stream, so that a survey without leaning pylons is the one it always was."""
     rng = np.random.default_rng(seed + 104729)
-    n = min(len(pylons), max(1, int(round(lean_share * len(pylons)))))
-    # the middle ones first: a leaning pylon with upright neighbours, as an inspection meets it
-    order = sorted(range(len(pylons)), key=lambda i: (abs(i - (len(pylons) - 1) / 2), rng.uniform()))
-    for i in sorted(order[:n]):
+    for i, (tilt, direction) in sorted(leans.items()):
         p = pylons[i]
-        toward = {"along": line_dir_deg, "across": line_dir_deg + 90.0}.get(lean_direction, rng.uniform(0, 360))
+        toward = {"along": line_dir_deg, "across": line_dir_deg + 90.0}.get(direction, rng.uniform(0, 360))
         toward += 180.0 * (rng.uniform() < 0.5)
-        p.pitch_deg, p.roll_deg = (round(v, 6) for v in lean_angles(p.heading_deg, lean_deg, toward))
+        p.pitch_deg, p.roll_deg = (round(v, 6) for v in lean_angles(p.heading_deg, tilt, toward))
+
+
+def leaning_pylons(n_pylons: int, lean_deg: float, lean_share: float, lean_direction: str, seed: int) -> dict:
+    """{index: (lean_deg, lean_direction)} for ``lean_share`` of the pylons (at least one when the
+    share is above 0), the middle ones first: a leaning pylon between upright neighbours, as an
+    inspection meets it."""
+    if lean_deg <= 0 or lean_share <= 0:
+        return {}
+    rng = np.random.default_rng(seed + 130363)
+    n = min(n_pylons, max(1, int(round(lean_share * n_pylons))))
+    order = sorted(range(n_pylons), key=lambda i: (abs(i - (n_pylons - 1) / 2), rng.uniform()))
+    return {i: (lean_deg, lean_direction) for i in order[:n]}
 
 
 def make_pylon_survey(seed: int = 1, n_pylons: int = 3, photos_per_pylon: int = 12, span_m: float = 150.0,
                       origin=(512000.0, 5403000.0), crs: str = "EPSG:25832", image_size=(2400, 1600),
-                      distance_m=(100.0, 150.0), slope_pct: float = 0.0, lean_deg: float = 0.0, lean_share: float = 0.0,
-                      lean_direction: str = "random") -> PhotoSurvey:
-    """A photo survey of ``n_pylons`` along a line; ``lean_share`` of them (the middle ones) lean
-    by ``lean_deg`` toward ``lean_direction`` (along, across the line or random), the others
-    stand within 0.3° of upright."""
+                      distance_m=(100.0, 150.0), slope_pct: float = 0.0, leans: dict | None = None) -> PhotoSurvey:
+    """A photo survey of ``n_pylons`` along a line; the pylons ``leans`` names ({index: (tilt_deg,
+    along | across | random)}, e.g. from ``leaning_pylons``) lean by exactly that much, the
+    others stand within 0.3° of upright."""
     rng = np.random.default_rng(seed)
     models = builtin_models()
     line_len = span_m * (n_pylons - 1)
@@ -179,7 +185,7 @@ def make_pylon_survey(seed: int = 1, n_pylons: int = 3, photos_per_pylon: int = 
         pylons.append(Pylon(name, float(origin[0] + uv[0]), float(origin[1] + uv[1]),
                             float(terrain.height(uv[0], uv[1])), round(float(heading), 3),
                             round(float(rng.uniform(-0.3, 0.3)), 3), round(float(rng.uniform(-0.3, 0.3)), 3)))
-    _lean(pylons, line_dir, lean_deg, lean_share, lean_direction, seed)
+    _lean(pylons, line_dir, leans or {}, seed)
     w, h = image_size
     f = 1.02 * w  # a 53° wide lens, like a 24 mm on full frame
     camera = (w, h, (round(f, 2), round(f * 1.0004, 2), round(w / 2 + rng.uniform(-8, 8), 2),
