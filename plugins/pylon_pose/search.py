@@ -485,7 +485,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         best = cand[int(np.argmax(score_poses(vB, rB, cand, a, b, kernel).sum(axis=0)))].copy()
         step("fine")
         shares = _shares(vB, rB, best, a, b, kernel)
-    if max_tilt_deg > 0 and float(shares.mean()) >= min_score / 2:  # a lean costs an upright fit half its cells at most
+    # a lean moves the top; the body below still matches upright, so a candidate under half of min_score is no pylon
+    if max_tilt_deg > 0 and float(shares.mean()) >= min_score / 2:
         best = search_tilt(vB, rB, best, a, b, height_m, max_tilt_deg, kernel)
         shares = _shares(vB, rB, best, a, b, kernel)
         step("tilt")
