@@ -142,15 +142,17 @@ def _run(inputs, params, ctx):
         for name, (a, b, h, sym) in models.items():
             r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
                                  min_score=params["min_score"], hypotheses=params["hypotheses"],
-                                 max_tilt_deg=params["max_tilt_deg"])
+                                 max_tilt_deg=params["max_tilt_deg"], min_photo_share=params["min_photo_share"])
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
         cand_scores.append(best[1].score if best is not None else 0.0)
-        if best is None or best[1].score < params["min_score"] or not np.isfinite(best[1].mad).all():
+        if best is None or best[1].score < params["min_score"]:
             continue
         # a pylon shows in every photo that sees it; clutter lines up with the model in one or two
         if best[1].photo_share(params["min_score"] / 2) < params["min_photo_share"]:
             inconsistent.append(round(best[1].score, 3))
+            continue
+        if not np.isfinite(best[1].mad).all():
             continue
         found.append(best)
     kept = []  # two searches that ended on one pylon: the better-scoring one stays

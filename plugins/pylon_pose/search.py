@@ -401,34 +401,40 @@ def tilted_poses(pose: np.ndarray, tilts: np.ndarray, pivot_m: float) -> np.ndar
 
 
 def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_deg: float, kernel=None,
-                steps_deg=(1.0, 0.25), shift_m=(1.0, 0.25), turn_deg=(3.0, 0.5), pivot_share: float = 0.4) -> np.ndarray:
+                step_deg: float = 1.0, shift_m: float = 1.0, turn_deg: float = 3.0, keep: int = 3,
+                pivot_share: float = 0.4) -> np.ndarray:
     """A leaning pylon's tilt by A_s (the method searches an upright tower; its future work is
-    this): pitch and roll on a grid of ``steps_deg[0]`` over the disc of ``max_tilt_deg``, then of
-    ``steps_deg[1]`` within one coarse step of the best, each with the base moved to keep the
-    axis through ``pivot_share`` of the height, then shifted ± ``shift_m`` and turned ±
-    ``turn_deg`` on grids of half that (an upright fit of a leaning tower compromises its
-    position and heading too); the pose summed best over the photos. The upright pose is one of
-    the candidates, so an upright tower keeps it unless a tilt matches better."""
-    best = np.asarray(pose, float).copy()
-    centre = best[4:6].copy()
-    for k, step in enumerate(steps_deg):
-        reach = max_tilt_deg if k == 0 else steps_deg[k - 1]
-        g = np.arange(-reach, reach + 1e-9, step)
-        t = np.array([(p, r) for p in g for r in g if np.hypot(p, r) <= reach + 1e-9]) + (0.0 if k == 0 else centre)
-        t = t[np.hypot(t[:, 0], t[:, 1]) <= max_tilt_deg + 1e-9]
-        cand = tilted_poses(best, t, pivot_share * height_m)
-        half, turn = shift_m[k], turn_deg[k]
-        offs = grid([0, 0, 0, 0, 0, 0], [half, half, 0, turn, 0, 0], [half / 2, half / 2, 1, turn / 2, 1, 1])
-        cand = (cand[:, None, :] + offs[None]).reshape(-1, 6)
+    this). Pitch and roll on a grid of ``step_deg`` over the disc of ``max_tilt_deg``, the base
+    moved to keep the axis through ``pivot_share`` of the height, each shifted ± ``shift_m`` and
+    turned ± ``turn_deg`` (an upright fit of a leaning tower compromises its position and heading
+    too); the ``keep`` best on finer shifts and turns; then a quarter of the tilt step about the
+    best. Each pose scored summed over the photos. The upright pose is one of the candidates, so an
+    upright tower keeps it unless a tilt matches better."""
+    def best_of(cand, n=1):
         sc = score_poses(views, rois, cand, a, b, kernel).sum(axis=0)
-        best = cand[int(np.argmax(sc))].copy()
-        centre = best[4:6].copy()
-    return best
+        return cand[np.argsort(-sc, kind="stable")[:n]]
+
+    def around(poses, half_m, step_m, turn, step_turn):
+        offs = grid(np.zeros(6), [half_m, half_m, 0, turn, 0, 0], [step_m, step_m, 1, step_turn, 1, 1])
+        return (np.asarray(poses)[:, None, :] + offs[None]).reshape(-1, 6)
+
+    def disc(centre, reach, step):
+        g = np.arange(-reach, reach + 1e-9, step)
+        t = np.array([(p, r) for p in g for r in g if np.hypot(p, r) <= reach + 1e-9]) + centre
+        return t[np.hypot(t[:, 0], t[:, 1]) <= max_tilt_deg + 1e-9]
+
+    pivot = pivot_share * height_m
+    coarse = tilted_poses(pose, disc(0.0, max_tilt_deg, step_deg), pivot)
+    seeds = best_of(around(coarse, shift_m, shift_m, turn_deg, turn_deg / 2), keep)
+    best = best_of(around(seeds, shift_m / 2, shift_m / 4, turn_deg / 2, turn_deg / 2))[0]
+    fine = tilted_poses(best, disc(best[4:6], step_deg / 2, step_deg / 4), pivot)
+    return best_of(around(fine, shift_m / 4, shift_m / 4, turn_deg / 6, turn_deg / 6))[0].copy()
 
 
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
               radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
-              hypotheses: str = "grid", max_tilt_deg: float = 5.0, progress=None) -> PoseResult | None:
+              hypotheses: str = "grid", max_tilt_deg: float = 5.0, min_photo_share: float = 0.0,
+              progress=None) -> PoseResult | None:
     """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m.
     First poses: with ``hypotheses="triangles"`` the method's MatchByTriangles (P3P, merged across
     photos, the best of four quarter turns); with ``"grid"``, or where the triangles give no pose
@@ -438,7 +444,9 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     current MADs, merged across photos by MAD-weighted medians; a joint search (summed over
     photos) within them; last the continuous refinement on the segments (``refine_on_segments``).
     Between the first poses and MatchSeparate, the tilt up to ``max_tilt_deg`` (``search_tilt``):
-    the method's search holds a tower upright."""
+    the method's search holds a tower upright. A candidate matching at least half of
+    ``min_score`` in fewer than ``min_photo_share`` of its photos there goes no further (the
+    caller's rule, applied before the fine stages too)."""
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     period = min(symmetry_deg, 360.0)
     step = (lambda *_: None) if progress is None else progress
@@ -490,7 +498,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         best = search_tilt(vB, rB, best, a, b, height_m, max_tilt_deg, kernel)
         shares = _shares(vB, rB, best, a, b, kernel)
         step("tilt")
-    if float(shares.mean()) < min_score:  # no pylon of this type here: skip the fine stages
+    # no pylon of this type here, or clutter that lines up with it in a few photos: skip the fine stages
+    if float(shares.mean()) < min_score or float(np.mean(shares >= min_score / 2)) < min_photo_share:
         return PoseResult(best, float(shares.mean()), np.full(4, np.nan), len(vB), shares)
     # C: MatchSeparate on 4 px cells, per photo, merged
     lean_m = height_m * np.sin(np.radians(tilt_of(best)[0] + 0.5))  # the top's offset from over the base
