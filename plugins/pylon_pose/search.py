@@ -407,8 +407,9 @@ def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_d
     this). Pitch and roll on a grid of ``step_deg`` over the disc of ``max_tilt_deg``, the base
     moved to keep the axis through ``pivot_share`` of the height, each shifted ± ``shift_m`` and
     turned ± ``turn_deg`` (an upright fit of a leaning tower compromises its position and heading
-    too); the ``keep`` best on finer shifts and turns; then a quarter of the tilt step about the
-    best. Each pose scored summed over the photos. The upright pose is one of the candidates, so an
+    too); the ``keep`` best on finer shifts and turns; then, where the best is not upright, a
+    quarter of the tilt step about it (where it is, the tilts finer than a step are left to
+    MatchSeparate, as for the method's upright search). Each pose scored summed over the photos. The upright pose is one of the candidates, so an
     upright tower keeps it unless a tilt matches better."""
     def best_of(cand, n=1):
         sc = score_poses(views, rois, cand, a, b, kernel).sum(axis=0)
@@ -427,6 +428,8 @@ def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_d
     coarse = tilted_poses(pose, disc(0.0, max_tilt_deg, step_deg), pivot)
     seeds = best_of(around(coarse, shift_m, shift_m, turn_deg, turn_deg / 2), keep)
     best = best_of(around(seeds, shift_m / 2, shift_m / 4, turn_deg / 2, turn_deg / 2))[0]
+    if not np.any(best[4:6]):  # upright on the grid that resolves a tilt: finer tilts are MatchSeparate's
+        return best.copy()
     fine = tilted_poses(best, disc(best[4:6], step_deg / 2, step_deg / 4), pivot)
     return best_of(around(fine, shift_m / 4, shift_m / 4, turn_deg / 6, turn_deg / 6))[0].copy()
 
