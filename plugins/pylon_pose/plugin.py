@@ -132,6 +132,9 @@ def _run(inputs, params, ctx):
         stats.update(model_triangle_side_m=[round(smin, 3), round(smax, 3)],
                      detector=params["detector"], min_per_photo=per_photo, min_per_photo_used=per_photo,
                      n_features=int(sum(len(t_) for t_ in tris)), n_candidates=int(len(rough)))
+    settings = search.SearchSettings(radius_m=params["radius_m"], mode=params["mode"], min_score=params["min_score"],
+                                     hypotheses=params["hypotheses"], max_tilt_deg=params["max_tilt_deg"],
+                                     min_photo_share=params["min_photo_share"])
     found, cand_scores, inconsistent = [], [], []
     for xy in ctx.progress(list(rough), desc="pose search", unit="pylon"):
         # a candidate this close to a pylon already found would converge onto it
@@ -140,9 +143,7 @@ def _run(inputs, params, ctx):
             continue
         best = None
         for name, (a, b, h, sym) in models.items():
-            r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, radius_m=params["radius_m"], mode=params["mode"],
-                                 min_score=params["min_score"], hypotheses=params["hypotheses"],
-                                 max_tilt_deg=params["max_tilt_deg"], min_photo_share=params["min_photo_share"])
+            r = search.find_pose(views, xy[:2], ground, a, b, h, sym, kernel, settings)
             if r is not None and (best is None or r.score > best[1].score):
                 best = (name, r)
         cand_scores.append(best[1].score if best is not None else 0.0)

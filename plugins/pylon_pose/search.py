@@ -400,17 +400,28 @@ def tilted_poses(pose: np.ndarray, tilts: np.ndarray, pivot_m: float) -> np.ndar
     return out
 
 
+@dataclass(frozen=True)
+class TiltGrid:
+    """The tilt search's grids: tilt step, shift and turn reach, seeds kept, pivot up the axis."""
+
+    step_deg: float = 1.0
+    shift_m: float = 1.0
+    turn_deg: float = 3.0
+    keep: int = 3
+    pivot_share: float = 0.4
+
+
 def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_deg: float, kernel=None,
-                step_deg: float = 1.0, shift_m: float = 1.0, turn_deg: float = 3.0, keep: int = 3,
-                pivot_share: float = 0.4) -> np.ndarray:
+                tg: TiltGrid = TiltGrid()) -> np.ndarray:
     """A leaning pylon's tilt by A_s (the method searches an upright tower; its future work is
     this). Pitch and roll on a grid of ``step_deg`` over the disc of ``max_tilt_deg``, the base
     moved to keep the axis through ``pivot_share`` of the height, each shifted ± ``shift_m`` and
     turned ± ``turn_deg`` (an upright fit of a leaning tower compromises its position and heading
     too); the ``keep`` best on finer shifts and turns; then, where the best is not upright, a
     quarter of the tilt step about it (where it is, the tilts finer than a step are left to
-    MatchSeparate, as for the method's upright search). Each pose scored summed over the photos. The upright pose is one of the candidates, so an
-    upright tower keeps it unless a tilt matches better."""
+    MatchSeparate, as for the method's upright search). Each pose scored summed over the photos.
+    The upright pose is one of the candidates, so an upright tower keeps it unless a tilt matches
+    better. The grids' sizes are ``tg``'s (``TiltGrid``)."""
     def best_of(cand, n=1):
         sc = score_poses(views, rois, cand, a, b, kernel).sum(axis=0)
         return cand[np.argsort(-sc, kind="stable")[:n]]
@@ -424,20 +435,69 @@ def search_tilt(views, rois, pose: np.ndarray, a, b, height_m: float, max_tilt_d
         t = np.array([(p, r) for p in g for r in g if np.hypot(p, r) <= reach + 1e-9]) + centre
         return t[np.hypot(t[:, 0], t[:, 1]) <= max_tilt_deg + 1e-9]
 
-    pivot = pivot_share * height_m
-    coarse = tilted_poses(pose, disc(0.0, max_tilt_deg, step_deg), pivot)
-    seeds = best_of(around(coarse, shift_m, shift_m, turn_deg, turn_deg / 2), keep)
-    best = best_of(around(seeds, shift_m / 2, shift_m / 4, turn_deg / 2, turn_deg / 2))[0]
+    pivot = tg.pivot_share * height_m
+    coarse = tilted_poses(pose, disc(0.0, max_tilt_deg, tg.step_deg), pivot)
+    seeds = best_of(around(coarse, tg.shift_m, tg.shift_m, tg.turn_deg, tg.turn_deg / 2), tg.keep)
+    best = best_of(around(seeds, tg.shift_m / 2, tg.shift_m / 4, tg.turn_deg / 2, tg.turn_deg / 2))[0]
     if not np.any(best[4:6]):  # upright on the grid that resolves a tilt: finer tilts are MatchSeparate's
         return best.copy()
-    fine = tilted_poses(best, disc(best[4:6], step_deg / 2, step_deg / 4), pivot)
-    return best_of(around(fine, shift_m / 4, shift_m / 4, turn_deg / 6, turn_deg / 6))[0].copy()
+    fine = tilted_poses(best, disc(best[4:6], tg.step_deg / 2, tg.step_deg / 4), pivot)
+    return best_of(around(fine, tg.shift_m / 4, tg.shift_m / 4, tg.turn_deg / 6, tg.turn_deg / 6))[0].copy()
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """The pose search's options (the plugin's parameters of the same names)."""
+
+    radius_m: float = 8.0
+    mode: str = "max"
+    iterations: int = 2
+    min_score: float = 0.0
+    hypotheses: str = "grid"
+    max_tilt_deg: float = 5.0
+    min_photo_share: float = 0.0
+
+
+def _match_separate_and_joint(vC, rC, pose, a, b, height_m: float, period: float, iterations: int, kernel=None):
+    """The method's MatchSeparate on 4 px cells (per photo the best rotation, then translation,
+    on grids within the current MADs, merged across photos by MAD-weighted medians), then a joint
+    search summed over the photos within them: (pose, MADs of x, y, z, heading, pitch, roll)."""
+    mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
+    pose = np.asarray(pose, float).copy()
+    rays = np.array([pose[:3] + [0, 0, height_m / 2] - v.centre for v in vC])
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    for _ in range(iterations):
+        rot = grid(pose, [0, 0, 0, max(mad[3], 0.5), max(mad[4], 0.1), max(mad[5], 0.1)], [1, 1, 1, 0.25, 0.1, 0.1])
+        sc = score_poses(vC, rC, rot, a, b, kernel)
+        best_k = rot[np.argmax(sc, axis=1)]
+        w = sc.max(axis=1)
+        merged = [mad_merge(wrap_deg(best_k[:, 3] - pose[3], period) + pose[3], w)]
+        merged += [mad_merge(best_k[:, k], w) for k in (4, 5)]
+        pose[3], pose[4], pose[5] = merged[0][0], merged[1][0], merged[2][0]
+        mad[3:] = [m[1] for m in merged]
+        tr = grid(pose, [max(mad[0], 0.3), max(mad[1], 0.3), max(mad[2], 0.3), 0, 0, 0], [0.1, 0.1, 0.1, 1, 1, 1])
+        sc = score_poses(vC, rC, tr, a, b, kernel)
+        best_k = tr[np.argmax(sc, axis=1)]
+        w = sc.max(axis=1)
+        for k in range(3):  # weight: similarity x sin(angle between the ray and the axis)
+            wk = w * np.sqrt(np.clip(1 - rays[:, k] ** 2, 0, 1))
+            pose[k], mad[k] = mad_merge(best_k[:, k], wk)
+        if np.all(mad[:3] <= 0.3) and mad[3] <= 1.0:
+            break
+    # D: joint refinement within the MADs (translation, then rotation, twice)
+    for _ in range(2):
+        tr = grid(pose, [min(max(mad[0], 0.1), 0.4), min(max(mad[1], 0.1), 0.4), min(max(mad[2], 0.1), 0.4), 0, 0, 0],
+                  [0.05, 0.05, 0.05, 1, 1, 1])
+        sc = score_poses(vC, rC, tr, a, b, kernel).sum(axis=0)
+        pose = tr[int(np.argmax(sc))].copy()
+        rot = grid(pose, [0, 0, 0, min(max(mad[3], 0.25), 1.0), 0.1, 0.1], [1, 1, 1, 0.125, 0.05, 0.05])
+        sc = score_poses(vC, rC, rot, a, b, kernel).sum(axis=0)
+        pose = rot[int(np.argmax(sc))].copy()
+    return pose, mad
 
 
 def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: float = 360.0, kernel=None,
-              radius_m: float = 8.0, mode: str = "max", iterations: int = 2, min_score: float = 0.0,
-              hypotheses: str = "grid", max_tilt_deg: float = 5.0, min_photo_share: float = 0.0,
-              progress=None) -> PoseResult | None:
+              settings: SearchSettings = SearchSettings(), progress=None) -> PoseResult | None:
     """A pylon's pose from the photos that see it, from a rough position (local frame) ± radius_m.
     First poses: with ``hypotheses="triangles"`` the method's MatchByTriangles (P3P, merged across
     photos, the best of four quarter turns); with ``"grid"``, or where the triangles give no pose
@@ -450,6 +510,8 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     the method's search holds a tower upright. A candidate matching at least half of
     ``min_score`` in fewer than ``min_photo_share`` of its photos there goes no further (the
     caller's rule, applied before the fine stages too)."""
+    st = settings
+    radius_m, mode, min_score, max_tilt_deg = st.radius_m, st.mode, st.min_score, st.max_tilt_deg
     extent = float(max(np.abs(a[:, :2]).max(), np.abs(b[:, :2]).max()))
     period = min(symmetry_deg, 360.0)
     step = (lambda *_: None) if progress is None else progress
@@ -459,7 +521,7 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
     if len(vB) < 2:
         return None
     start = None
-    if hypotheses == "triangles":  # the method's MatchByTriangles; the exhaustive search where it finds nothing
+    if st.hypotheses == "triangles":  # the method's MatchByTriangles; the exhaustive search where it finds nothing
         start = match_by_triangles(vB, rB, c0, ground, a, b, height_m, period, radius_m, kernel, min_score,
                                    max_tilt_deg=max_tilt_deg + 1.0)
         step("triangles")
@@ -502,43 +564,12 @@ def find_pose(views, rough_xy, ground, a, b, height_m: float, symmetry_deg: floa
         shares = _shares(vB, rB, best, a, b, kernel)
         step("tilt")
     # no pylon of this type here, or clutter that lines up with it in a few photos: skip the fine stages
-    if float(shares.mean()) < min_score or float(np.mean(shares >= min_score / 2)) < min_photo_share:
+    if float(shares.mean()) < min_score or float(np.mean(shares >= min_score / 2)) < st.min_photo_share:
         return PoseResult(best, float(shares.mean()), np.full(4, np.nan), len(vB), shares)
     # C: MatchSeparate on 4 px cells, per photo, merged
     lean_m = height_m * np.sin(np.radians(tilt_of(best)[0] + 0.5))  # the top's offset from over the base
     vC, rC = _rois(views, best[:3], extent + 1.5 + lean_m, height_m, 4, mode)
-    mad = np.array([0.5, 0.5, 0.5, 2.0, 0.3, 0.3])
-    pose = best.copy()
-    rays = np.array([pose[:3] + [0, 0, height_m / 2] - v.centre for v in vC])
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    for _ in range(iterations):
-        rot = grid(pose, [0, 0, 0, max(mad[3], 0.5), max(mad[4], 0.1), max(mad[5], 0.1)], [1, 1, 1, 0.25, 0.1, 0.1])
-        sc = score_poses(vC, rC, rot, a, b, kernel)
-        best_k = rot[np.argmax(sc, axis=1)]
-        w = sc.max(axis=1)
-        merged = [mad_merge(wrap_deg(best_k[:, 3] - pose[3], period) + pose[3], w)]
-        merged += [mad_merge(best_k[:, k], w) for k in (4, 5)]
-        pose[3], pose[4], pose[5] = merged[0][0], merged[1][0], merged[2][0]
-        mad[3:] = [m[1] for m in merged]
-        tr = grid(pose, [max(mad[0], 0.3), max(mad[1], 0.3), max(mad[2], 0.3), 0, 0, 0], [0.1, 0.1, 0.1, 1, 1, 1])
-        sc = score_poses(vC, rC, tr, a, b, kernel)
-        best_k = tr[np.argmax(sc, axis=1)]
-        w = sc.max(axis=1)
-        for k in range(3):  # weight: similarity x sin(angle between the ray and the axis)
-            wk = w * np.sqrt(np.clip(1 - rays[:, k] ** 2, 0, 1))
-            pose[k], mad[k] = mad_merge(best_k[:, k], wk)
-        if np.all(mad[:3] <= 0.3) and mad[3] <= 1.0:
-            break
-    step("separate")
-    # D: joint refinement within the MADs (translation, then rotation, twice)
-    for _ in range(2):
-        tr = grid(pose, [min(max(mad[0], 0.1), 0.4), min(max(mad[1], 0.1), 0.4), min(max(mad[2], 0.1), 0.4), 0, 0, 0],
-                  [0.05, 0.05, 0.05, 1, 1, 1])
-        sc = score_poses(vC, rC, tr, a, b, kernel).sum(axis=0)
-        pose = tr[int(np.argmax(sc))].copy()
-        rot = grid(pose, [0, 0, 0, min(max(mad[3], 0.25), 1.0), 0.1, 0.1], [1, 1, 1, 0.125, 0.05, 0.05])
-        sc = score_poses(vC, rC, rot, a, b, kernel).sum(axis=0)
-        pose = rot[int(np.argmax(sc))].copy()
+    pose, mad = _match_separate_and_joint(vC, rC, best, a, b, height_m, period, st.iterations, kernel)
     step("joint")
     # E: A_s stops at its 4 px cells; the segments themselves carry the pose to a fraction of a pixel
     refined, n_edge, rms, share = refine_on_segments(vC, pose, a, b, extent_m=extent + lean_m)
