@@ -264,10 +264,10 @@ def _bridge_scene(rng, kink=False):
     return spans, line, pts, free, is_gap
 
 
-def chain_until(path, until: str | None, **params):
+def chain_until(path, until: str | None, rules=None, **params):
     """The power-line chain on the cloud file ``path`` up to stage ``until`` (public stage API:
     ``stages.run_chain``): (scene, state, settings, ctx), to test a stage on what the stages
-    before it hand on."""
+    before it hand on; ``rules`` (a ``settings.Rules``) in place of the plugin's."""
     from toolbox_plugins.powerlines.settings import Settings
     from toolbox_plugins.powerlines.stages import run_chain
 
@@ -277,6 +277,8 @@ def chain_until(path, until: str | None, **params):
 
     reg = registry()
     settings = Settings.of(reg.get("powerlines").validate_params(params))
+    if rules is not None:
+        settings.rules = rules
     ctx = Context(reg, "powerlines", quiet=True)
     scene, st = run_chain(read_points(path), settings, ctx, until=until)
     return scene, st, settings, ctx

@@ -634,16 +634,38 @@ def test_the_methods_cell_on_side_by_side_conductors_says_what_to_do(tmp_path, c
     assert any("leave cell_size_m automatic" in r.getMessage() for r in caplog.records)
 
 
+# the core decisions that take a rules record, by the stage modules that call them
+RULED = {"plan_lines": ("conductors_3d", "ribbon_lines"), "more_wires": ("short_wires", "sibling_wires", "grow_span_ends"),
+         "next_spans": ("next_spans",), "supports": ("find_pylons", "find_poles", "find_towers_passed_through",
+                                                     "grow_span_ends"),
+         "cleaning": ("in_foliage", "in_a_surface", "along_a_surface", "sibling_wires")}
+
+
 @pytest.mark.xdist_group("corridor")  # one worker makes the session's corridor and its run
-def test_the_chain_stopped_at_a_stage_and_resumed_gives_the_whole_runs_layers(corridor, corridor_result):
+def test_the_chain_stopped_at_a_stage_and_resumed_gives_the_whole_runs_layers(corridor, corridor_result, monkeypatch):
     """The stage API: the chain run up to the rejection stage hands on labels per candidate; the
     stages after it, resumed on that state, switch them to labels per input point (at the
     cleaning stage), and the layers stage then gives the conductors and crossings of the whole
-    run (``toolbox run powerlines``) on the same file."""
+    run (``toolbox run powerlines``) on the same file. Every core decision called gets its record
+    of the run's ``settings.rules`` (copies here: the plugin's own would pass unnoticed)."""
+    import dataclasses
+    import importlib
+
+    from toolbox_plugins.powerlines.settings import Rules
     from toolbox_plugins.powerlines.stages import layers, run_stages
     from toolbox_plugins.powerlines.state import CandidateLabels, PointLabels
 
-    scene, st, settings, ctx = chain_until(corridor, "rejection")
+    given = {}
+    for module, names in RULED.items():
+        mod = importlib.import_module(f"toolbox_plugins.powerlines.stages.{module}")
+        for name in names:
+            def spy(*a, _f=getattr(mod, name), _name=name, **kw):
+                given.setdefault(_name, []).append(kw.get("rules"))
+                return _f(*a, **kw)
+            monkeypatch.setattr(mod, name, spy)
+    plugin_rules = Rules()
+    rules = Rules(**{f.name: dataclasses.replace(getattr(plugin_rules, f.name)) for f in dataclasses.fields(Rules)})
+    scene, st, settings, ctx = chain_until(corridor, "rejection", rules=rules)
     assert isinstance(st.labels, CandidateLabels) and st.supports is None
     assert len(st.labels.points) == len(st.labels.line) and (st.labels.line >= 0).any()
     st = run_stages(scene, st, settings, ctx, first="next_spans", last="supports")
@@ -659,3 +681,11 @@ def test_the_chain_stopped_at_a_stage_and_resumed_gives_the_whole_runs_layers(co
     assert np.allclose(sorted(got["conductors"].length), sorted(ref.length), atol=1e-6)
     with pytest.raises(ValueError, match="no stage 'tophat'"):
         run_stages(scene, st, settings, ctx, first="tophat")
+    record = {"conductors_3d": rules.wires, "ribbon_lines": rules.ribbons, "short_wires": rules.short_wires,
+              "sibling_wires": rules.siblings, "grow_span_ends": rules.grow, "find_pylons": rules.towers,
+              "find_poles": rules.poles, "find_towers_passed_through": rules.passed_through,
+              "in_foliage": rules.foliage, "in_a_surface": rules.surface, "along_a_surface": rules.along_surface,
+              "next_spans": rules.next_spans}
+    assert {"conductors_3d", "ribbon_lines", "find_pylons", "find_poles", "in_foliage"} <= set(given)
+    for name, got_rules in given.items():
+        assert all(r is record[name] for r in got_rules), name

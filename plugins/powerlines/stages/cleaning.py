@@ -21,7 +21,7 @@ from ..core import (
     off_their_spans,
     sibling_wires,
 )
-from ..settings import GROW_FROM_M
+from ..settings import GROW_FROM_M, Rules
 from ..state import State, Wires
 from ..wire_sets import keep_conductors
 
@@ -48,12 +48,12 @@ def stage(scene, st: State, settings, ctx) -> State:
     around_tree = cKDTree(around_xyz) if len(around) else None
     wires = (spans, geo, pc.x[wire_pt] * hu, pc.y[wire_pt] * hu, pc.z[wire_pt] * vu, conductor_of[wire_pt],
              wire_of_input[wire_pt], params["max_rms_3d_m"], around_xyz)
-    foliage = wire_pt[in_foliage(*wires, around_tree=around_tree)]
+    foliage = wire_pt[in_foliage(*wires, around_tree=around_tree, rules=settings.rules.foliage)]
     # a line whose points lie in a surface (the tops of crowns, a roof's rows) or along one (a sparse
     # roof's scan row or eave) is none
     around_wire = np.where(conductor_of[around] >= 0, conductor_of[around] * WIRE_ID_BASE + wire_of_input[around], -1)
-    surfaces = in_a_surface(*wires, around_wire, around_tree=around_tree) | \
-        along_a_surface(*wires, around_wire, around_tree=around_tree)
+    surfaces = in_a_surface(*wires, around_wire, around_tree=around_tree, rules=settings.rules.surface) | \
+        along_a_surface(*wires, around_wire, around_tree=around_tree, rules=settings.rules.along_surface)
     conductor_of[foliage] = -1
     if surfaces:
         kept = [i for i in range(len(geo)) if i not in surfaces]
@@ -66,7 +66,7 @@ def stage(scene, st: State, settings, ctx) -> State:
         # surface are gone: a facade's scan rows hang one over another under such a line)
         t = time.perf_counter()
         spans, n_stacked = add_stacked_wires(pc, idx[(conductor_of[idx] < 0) & ~tower_pt[idx]], geo, spans,
-                                             conductor_of, wire_of_input, params, hu, vu)
+                                             conductor_of, wire_of_input, params, hu, vu, settings.rules)
         st.counts["n_sibling_wires"] += n_stacked
         st.timings["sibling_wires_s"] = st.timings.get("sibling_wires_s", 0.0) + time.perf_counter() - t
     st.counts.update(n_off_trend_points=len(off_trend), n_foliage_points=len(foliage), n_surface_lines=len(surfaces))
@@ -77,7 +77,7 @@ def stage(scene, st: State, settings, ctx) -> State:
     return st
 
 
-def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, vu):
+def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, vu, rules=None):
     """``sibling_wires`` over and under the fitted spans among the points ``pool`` (indices into
     ``pc``, on no wire), each added as a further wire of the span's conductor (one over another,
     they are one line in plan): ``conductor_of`` and ``wire_of`` (per point of ``pc``) are
@@ -88,7 +88,8 @@ def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, v
     # (S_min long, but covering no share of the span: the cables of a stack hide one another
     # over stretches, and a leftover stub of the span's own wire is inside its fit tolerance)
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
-                          params["s_min_m"], stacked=True, min_cover=0.0)
+                          params["s_min_m"], stacked=True, min_cover=0.0,
+                          rules=(rules or Rules()).siblings)
     # each conductor's highest wire number so far (its spans' and its points'), found once
     top = np.full(len(geo), -1, np.int64)
     on = conductor_of >= 0

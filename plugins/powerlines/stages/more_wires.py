@@ -12,7 +12,7 @@ import numpy as np
 from shapely.geometry import LineString
 
 from ..core import fit_catenary, grow_span_ends, make_span, points_on_spans, short_wires, sibling_wires
-from ..settings import MIN_SECOND_PASS
+from ..settings import MIN_SECOND_PASS, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import add_pass, keep_conductors
 from .plan_lines import lines_and_wires
@@ -32,6 +32,7 @@ def stage(scene, st: State, settings, ctx) -> State:
         t = time.perf_counter()
         counts = {}  # its stage times are second_pass_s; its turned lines count with the first's
         found2 = lines_and_wires(pc, free, scene.hag, settings.cell_m, params, ctx, counts, min_fit_share=0.5,
+                                 rules=settings.rules,
                                  optional=True)
         if found2 is not None:
             for k in ("n_lines_realigned", "n_twin_lines_merged"):
@@ -55,6 +56,7 @@ def stage(scene, st: State, settings, ctx) -> State:
         keep = np.r_[keep, idx[steep]]
         line_of, wire_of_pt = np.r_[line_of, np.full(steep.sum(), -1)], np.r_[wire_of_pt, np.full(steep.sum(), -1)]
         found3 = short_wire_pass(pc, keep[line_of < 0], off, idx[steep], wired, params, hu, vu, n_searched=n_free,
+                                 rules=settings.rules,
                                  wire_like=wire_like[off])
         n_before = len(geo)
         lines, geo, spans = add_pass(found3, lines, geo, spans, line_of, wire_of_pt, hu, params)
@@ -68,7 +70,8 @@ def stage(scene, st: State, settings, ctx) -> State:
         # too sparse to find alone share one offset across it and one height above its catenary
         t = time.perf_counter()
         lines, geo, spans, line_of, wire_of_pt, n_sibling = add_sibling_wires(pc, keep, lines, geo, spans, line_of,
-                                                                              wire_of_pt, params, hu, vu)
+                                                                              wire_of_pt, params, hu, vu,
+                                                                              settings.rules)
         timings["sibling_wires_s"] = time.perf_counter() - t
 
     # candidates the shape test left out that lie on a fitted span are its points too: steep ones
@@ -89,7 +92,8 @@ def stage(scene, st: State, settings, ctx) -> State:
         t = time.perf_counter()
         g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
                                         ~np.isin(low, keep[line_of >= 0]), params["max_rms_3d_m"],
-                                        max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"])
+                                        max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"],
+                                        rules=settings.rules.grow)
         on = g_line >= 0
         grown = low[on]
         # candidates on no wire yet are relabelled in place, the rest appended
@@ -106,7 +110,7 @@ def stage(scene, st: State, settings, ctx) -> State:
     return st
 
 
-def short_wire_pass(pc, free, off_ground, steep, wired, params, hu, vu, n_searched=None, wire_like=None):
+def short_wire_pass(pc, free, off_ground, steep, wired, params, hu, vu, n_searched=None, wire_like=None, rules=None):
     """``short_wires`` among the wire-like points ``free`` (indices into ``pc``; ``off_ground``,
     ``steep``, ``wired``: the points off the ground, of structures and of the wires found;
     ``wire_like``: which of ``off_ground`` are; runs are drawn from the first ``n_searched`` of
@@ -121,7 +125,8 @@ def short_wire_pass(pc, free, off_ground, steep, wired, params, hu, vu, n_search
         return np.column_stack([pc.x[ix] * hu, pc.y[ix] * hu, pc.z[ix] * vu]) - origin
 
     runs = short_wires(xyz - origin, local(off_ground), local(steep), local(wired), params["s_min_m"] / 2,
-                       params["v_max_m"], n_searched=n_searched, wire_like=wire_like)
+                       params["v_max_m"], n_searched=n_searched, wire_like=wire_like,
+                       rules=(rules or Rules()).short_wires)
     if not runs:
         return None
     lines_xy = []
@@ -160,7 +165,7 @@ def straight_conductors(pc, xyz, lines_xy, hu):
     return lines, geo, spans, line_of, np.where(line_of >= 0, 0, -1), 0
 
 
-def add_sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+def add_sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, rules=None):
     """``sibling_wires`` beside the fitted spans among the wire-like points ``keep`` (indices
     into ``pc``; ``line_of``, ``wire_of_pt``: their conductor and wire so far), added as new
     conductors (pieces beside the spans of one line at one offset make one, a span each). A line
@@ -172,7 +177,8 @@ def add_sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, 
     xyz = np.column_stack([pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu])
     length = np.array([t1 - t0 for (_, _, t0, t1) in geo] + [0.0])
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
-                          params["s_min_m"], owner=line_of, owner_length=length[line_of], min_points=min_points)
+                          params["s_min_m"], owner=line_of, owner_length=length[line_of], min_points=min_points,
+                          rules=(rules or Rules()).siblings)
     if not found:
         return lines, geo, spans, line_of, wire_of_pt, 0
     taken = np.zeros(len(keep), bool)

@@ -11,6 +11,7 @@ import numpy as np
 from shapely.geometry import LineString
 
 from ..core import bridge_gaps, make_span, next_spans
+from ..settings import Rules
 from ..state import CandidateLabels, State, Wires
 
 
@@ -22,7 +23,8 @@ def stage(scene, st: State, settings, ctx) -> State:
     if params["next_spans"] and spans:
         t = time.perf_counter()
         lines, geo, spans, keep, line_of, wire_of_pt, n_next = add_next_spans(pc, low, keep, lines, geo, spans,
-                                                                              line_of, wire_of_pt, params, hu, vu)
+                                                                              line_of, wire_of_pt, params, hu, vu,
+                                                                              settings.rules)
         st.timings["next_spans_s"] = time.perf_counter() - t
     if params["bridge_gaps"] and spans:
         t = time.perf_counter()
@@ -45,14 +47,15 @@ def labels_of_low(low, keep, line_of, wire_of_pt, n_points):
     return low_line, low_wire
 
 
-def add_next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu):
+def add_next_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, params, hu, vu, rules=None):
     """``next_spans`` of the wires found among the points ``low`` (indices into ``pc``: off the
     ground), added by ``add_found_spans``. Returns what it returns."""
+    r = (rules or Rules()).next_spans
     low_line, low_wire = labels_of_low(low, keep, line_of, wire_of_pt, len(pc))
     found = next_spans(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu, low_line < 0,
                        params["max_rms_3d_m"], max_gap_m=2 * params["v_max_m"],
-                       reach_m=max(60.0, 8 * params["s_min_m"]), min_span_m=params["s_min_m"], line_of=low_line,
-                       wire_of=low_wire)
+                       reach_m=max(r.reach_m, 8 * params["s_min_m"]), min_span_m=params["s_min_m"], line_of=low_line,
+                       wire_of=low_wire, rules=r)
     return add_found_spans(pc, low, keep, lines, geo, spans, line_of, wire_of_pt, found, hu, vu)
 
 

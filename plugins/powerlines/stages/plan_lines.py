@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core import band_owner, conductors_3d, ribbon_lines, stands_clear, thin_across, twin_lines, wire_point_spacing
 from ..plan_geometry import merge_twins, realign, redrawn_lines
-from ..settings import GAP_SPACINGS, STANDS_CLEAR_MAX
+from ..settings import GAP_SPACINGS, STANDS_CLEAR_MAX, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import fold_stubs, keep_conductors
 
@@ -19,7 +19,7 @@ from ..wire_sets import fold_stubs, keep_conductors
 def stage(scene, st: State, settings, ctx) -> State:
     pc, hu, params, timings = scene.pc, scene.hu, settings.params, st.timings
     keep = scene.candidates[scene.linear]
-    found = lines_and_wires(pc, keep, scene.hag, settings.cell_m, params, ctx, timings)
+    found = lines_and_wires(pc, keep, scene.hag, settings.cell_m, params, ctx, timings, rules=settings.rules)
     lines, geo, spans, line_of, wire_of_pt, n_th = found
     spacing = wire_point_spacing(spans, geo, pc.x[keep] * hu, pc.y[keep] * hu, line_of, wire_of_pt,
                                  params["max_rms_3d_m"], 2 * params["v_max_m"])
@@ -27,17 +27,19 @@ def stage(scene, st: State, settings, ctx) -> State:
         for k in ("n_lines_realigned", "n_twin_lines_merged"):  # the lines of the run kept are the ones counted
             timings.pop(k, None)
         lines, geo, spans, line_of, wire_of_pt, n_th = lines_and_wires(pc, keep, scene.hag, settings.cell_m, params,
-                                                                       ctx, timings)
+                                                                       ctx, timings, rules=settings.rules)
     lines, geo, spans, line_of, wire_of_pt = fold_stubs(lines, geo, spans, line_of, wire_of_pt, hu, params)
     st.wires, st.labels = Wires(lines, geo, spans), CandidateLabels(keep, line_of, wire_of_pt)
     st.n_tophat, st.wire_spacing_m = n_th, spacing
     return st
 
 
-def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0, optional=False):
+def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_share=0.0, optional=False, rules=None):
     """Top-hat, tiled Hough and the 3D step on the wire-like candidates ``keep`` (indices into
     ``pc``): (Hough layers, line geometry, spans, per-keep conductor and wire, top-hat size);
-    None when ``optional`` and the top-hat keeps too few points for a line."""
+    None when ``optional`` and the top-hat keeps too few points for a line. ``rules``: the run's
+    ``settings.Rules`` (None: the plugin's)."""
+    rules = rules or Rules()
     hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     t = time.perf_counter()
     sub = pc.subset(keep)
@@ -69,7 +71,8 @@ def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_shar
     px, py = pc.x[keep] * hu, pc.y[keep] * hu
     # three or more wires side by side within twice band_m (a horizontal three-phase line): the
     # Hough's lines lie between them, leaning from one to the next; one line per wire instead
-    redrawn = ribbon_lines(geo, px, py, params["band_m"] * hu, params["s_min_m"], 2 * params["v_max_m"])
+    redrawn = ribbon_lines(geo, px, py, params["band_m"] * hu, params["s_min_m"], 2 * params["v_max_m"],
+                           rules=rules.ribbons)
     if redrawn is not None:
         geo, source, held = redrawn
         lines = redrawn_lines(lines, geo, source, held, hu)
@@ -79,7 +82,7 @@ def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_shar
         return conductors_3d(
             geo, px, py, pc.z[keep] * vu, params["band_3d_m"], z_link=1.0,
             s_link=2 * params["v_max_m"], min_span=params["s_min_m"], max_rms=params["max_rms_3d_m"],
-            ground_z=(pc.z[keep] * vu - hag[keep]), only=only)
+            ground_z=(pc.z[keep] * vu - hag[keep]), only=only, rules=rules.wires)
 
     spans, line_of, wire_of_pt = step_3d(geo)
     before = geo

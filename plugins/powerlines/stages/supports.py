@@ -14,7 +14,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from ..core import catenary, find_poles, find_pylons, find_towers_passed_through, grow_span_ends, pylon_points
-from ..settings import POLE_FOOTPRINT_M, POLE_TAKES_M
+from ..settings import POLE_FOOTPRINT_M, POLE_TAKES_M, Rules
 from ..state import CandidateLabels, State, Supports, Wires
 from ..wire_sets import keep_conductors
 
@@ -28,7 +28,8 @@ def stage(scene, st: State, settings, ctx) -> State:
     conductor_of = np.full(len(pc), -1)  # per input point: the conductor it is a wire point of
     conductor_of[keep] = line_of
     passed_by = []
-    pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, passed_by=passed_by)
+    pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, passed_by=passed_by,
+                                           rules=settings.rules)
     with_arms, own_arms = [], []
     wire_ends = fitted_wire_ends(geo, spans, params["max_rms_3d_m"])
     arms = arm_lines(lines["conductors"], found, hu, with_arms=with_arms, wire_ends=wire_ends)
@@ -42,7 +43,8 @@ def stage(scene, st: State, settings, ctx) -> State:
         # a tower whose arms were taken for conductors stays one, though without their span ends
         # too few may end at it (a suspension tower the wires run through)
         also = [found[i] for i in sorted(set(with_arms))] + [passed_by[i] for i in sorted(set(own_arms))]
-        pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=also)
+        pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=also,
+                                               rules=settings.rules)
     if params["grow_spans"] and found:
         # with the supports found, a stack's wires grow up to the pole or tower they face: in a
         # sparse stack the other wires' few points made the columns too noisy to tell the support
@@ -50,7 +52,7 @@ def stage(scene, st: State, settings, ctx) -> State:
         g_line, g_wire = grow_span_ends(spans, geo, pc.x[low] * hu, pc.y[low] * hu, pc.z[low] * vu,
                                         conductor_of[low] < 0, params["max_rms_3d_m"],
                                         max_gap_m=2 * params["v_max_m"], reach_m=2 * params["s_min_m"],
-                                        supports=np.array([[p.x, p.y] for p in found]))
+                                        supports=np.array([[p.x, p.y] for p in found]), rules=settings.rules.grow)
         on = g_line >= 0
         keep = np.r_[keep, low[on]]
         line_of, wire_of_pt = np.r_[line_of, g_line[on]], np.r_[wire_of_pt, g_wire[on]]
@@ -60,7 +62,8 @@ def stage(scene, st: State, settings, ctx) -> State:
         timings["grow_spans_s"] = timings.get("grow_spans_s", 0.0) + grow_time
         t += grow_time
         if on.any():  # a tower's footprint may have grown along the wires' points now taken
-            pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=found)
+            pylons, tower_pt, found = pylons_layer(scene, conductor_of, Wires(lines, geo, spans), params, also=found,
+                                                   rules=settings.rules)
     if len(grown) and found:
         # a wire continued across a tower's footprint is the tower's (the producer's convention
         # on AHN4: the wire between the arms is class 15); one grown up to a pole stays wire
@@ -77,10 +80,12 @@ def stage(scene, st: State, settings, ctx) -> State:
     return st
 
 
-def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=None):
+def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=None, rules=None):
     """The ``pylons`` layer (PointZ at each tower's base) and the mask of tower points, given each
     point's conductor so far (``conductor_of``, -1: none) and the ``wires`` found; towers of
-    ``also`` (found before) are kept where none is found within 2 m of them now."""
+    ``also`` (found before) are kept where none is found within 2 m of them now. ``rules``: the run's
+    ``settings.Rules`` (None: the plugin's)."""
+    rules = rules or Rules()
     pc, hag, ground_cls, hu, vu, dtm = scene.pc, scene.hag, scene.ground_cls, scene.hu, scene.vu, scene.dtm
     _, geo, spans = wires.as_tuple()
     cond = wires.lines["conductors"]
@@ -106,10 +111,11 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
     wire_xyh = (pc.x[wire] * hu, pc.y[wire] * hu, hag[wire])
     found = find_pylons(*off_xyh, ends, np.asarray(end_z) - ground_z, headings, lines_xy,
                         top_share=params["pylon_top_share"], span_lines=span_lines, passed_by=passed_by,
-                        wire_xyh=wire_xyh)
+                        wire_xyh=wire_xyh, rules=rules.towers)
     found += [t for t in also if all(np.hypot(t.x - q.x, t.y - q.y) > 2.0 for q in found)]
     poles = find_poles(*off_xyh, *wire_xyh, headings, lines_xy, span_ends=ends,
-                       span_end_hag=np.asarray(end_z) - ground_z, top_share=params["pylon_top_share"])
+                       span_end_hag=np.asarray(end_z) - ground_z, top_share=params["pylon_top_share"],
+                       rules=rules.poles)
     if poles:
         # where a pole carries the wires, a tower found beside it is the crown next to the pole
         # that took its span ends (a street scan's trees reach the wires' height)
@@ -117,7 +123,7 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
         found = [t for t in found if np.hypot(*(pxy - [t.x, t.y]).T).min() > POLE_TAKES_M] + poles
     # suspension towers the wires run through with no span ending there
     found += find_towers_passed_through(*off_xyh, *wire_xyh, headings, lines_xy, known=found,
-                                        top_share=params["pylon_top_share"])
+                                        top_share=params["pylon_top_share"], rules=rules.passed_through)
     tower = np.zeros(len(pc), bool)
     # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
     cand = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2))
