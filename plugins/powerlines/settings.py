@@ -1,14 +1,13 @@
 """The power-line chain's settings: the run's parameters with the values derived from them, the
-plugin's fixed values, each with where it came from, and ``Rules``: the thresholds of every core
-decision the stages take, one record per decision. (Not here yet, #76: the numeric defaults of
-the smaller core helpers, and the literals inside function bodies.)"""
+plugin's fixed values, each with where it came from, and the run's ``rules`` (``rules.Rules``: the
+thresholds of every core decision the stages take, one record per decision). (Not there yet,
+#76: the numeric defaults of the smaller core helpers, and the literals inside function bodies.)"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .core import (AlongSurfaceRules, FoliageRules, GrowRules, NextSpanRules, PassedThroughRules, PoleRules,
-                   RibbonRules, ShortWireRules, SiblingRules, SurfaceRules, TowerRules, WireRules)
+from .rules import Rules
 
 # the method's V_max, and how many median point spacings along a wire a gap may span before it
 # ends a run: 2.5 m is about 10 spacings on 10 pts/m2 ALS (and 36 on the method's 228 pts/m2), so
@@ -38,40 +37,6 @@ ALONG_SLOPE_MAX = 0.01746
 MIN_CANDIDATES = 10  # fewer candidates than this: no wire can be there (a field, a road)
 MIN_SECOND_PASS = 100  # wire-like points left on no wire that make a second pass worth its time
 GROW_FROM_M = 1.0  # spans grow into, and the cleaning looks at, points this far off the ground
-
-
-@dataclass(frozen=True)
-class Rules:
-    """The thresholds of each decision of the chain, by stage. Each record's function documents
-    what every field does; where the values came from is said beside each record. A stage passes
-    its record to the core function, with the values it derives from the run given by name.
-    (``PairRules`` is taken from ``towers`` by ``find_pylons``; ``PeelRules`` is the 3D fit's own.)"""
-
-    # each record's values were set on the synthetic variant family, AHN4 and the Oakland scans; the
-    # section of docs/powerlines.md named beside it says which scene set which value, and why
-
-    # plan_lines, "A conductor is a wire in 3D" (the stage gives max_rms from max_rms_3d_m)
-    wires: WireRules = field(default_factory=WireRules)
-    # plan_lines, "Bundles and ribbons"
-    ribbons: RibbonRules = field(default_factory=RibbonRules)
-    # more_wires, "Wires too short for the Hough: short wires, pole wires"
-    short_wires: ShortWireRules = field(default_factory=ShortWireRules)
-    # more_wires and cleaning, "Phases too sparse to find alone, stacks, next spans, gaps"
-    siblings: SiblingRules = field(default_factory=SiblingRules)
-    # more_wires and supports, "Each wire's points: grown, foliage taken off"
-    grow: GrowRules = field(default_factory=GrowRules)
-    # next_spans, "Phases too sparse to find alone, stacks, next spans, gaps" (the stage gives reach_m
-    # from s_min_m)
-    next_spans: NextSpanRules = field(default_factory=NextSpanRules)
-    # supports, "Towers and poles" and "Tower rules and the scenes that set them" (pylon_top_share
-    # is the user's)
-    towers: TowerRules = field(default_factory=TowerRules)
-    passed_through: PassedThroughRules = field(default_factory=PassedThroughRules)
-    poles: PoleRules = field(default_factory=PoleRules)
-    # cleaning, "Each wire's points: grown, foliage taken off" and "Lines in a surface"
-    foliage: FoliageRules = field(default_factory=FoliageRules)
-    surface: SurfaceRules = field(default_factory=SurfaceRules)
-    along_surface: AlongSurfaceRules = field(default_factory=AlongSurfaceRules)
 
 
 @dataclass

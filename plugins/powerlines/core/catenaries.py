@@ -7,19 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# a wire is thin across its line: its points' lateral rms about a straight plan trend (ALS and
-# mobile scans alike: 0.04-0.1 m; a crown's edge lined up along a street is wider)
-WIRE_LATERAL_RMS_M = 0.15
-
+from ..rules import SIDE_BY_SIDE_MIN_GAP_M, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
 
 # the least lateral tolerance of a wire's points about its trend, whatever their measured
 # scatter: a few centimetres of ranging noise on either side
 WIRE_LATERAL_FLOOR_M = 0.05
-
-
-# the least distance across the line at which the 3D step tells side-by-side wires apart (a
-# triangle bundle's 0.2 m stays one piece, a ribbon's 0.3 m does not)
-SIDE_BY_SIDE_MIN_GAP_M = 0.25
 
 
 # the least rms about its catenary that a wire's span may have, whatever the fit of the span it
@@ -38,10 +30,6 @@ ISOLATION_M = 0.5
 
 # a wire's id over all lines: line * WIRE_ID_BASE + wire
 WIRE_ID_BASE = 1 << 20
-
-
-# below this core-to-ring contrast (1.5 times a surface's 7) a line's points are a surface's
-SURFACE_CONTRAST = 10.5
 
 
 # how many of a set's best-supported lines (through distinct points) straight_wires tries before

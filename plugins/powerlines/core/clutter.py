@@ -4,12 +4,12 @@ along a surface."""
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .catenaries import SURFACE_CONTRAST, WIRE_ID_BASE, catenary, fit_tolerance_m, line_fit
+from ..rules import AlongSurfaceRules, FoliageRules, SurfaceRules
+from .catenaries import WIRE_ID_BASE, catenary, fit_tolerance_m, line_fit
 
 
 def _contrast(tree, k, s, off, z, fit) -> float:
@@ -82,15 +82,6 @@ def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, 
             off_trend[k] = False
     return off_trend
 
-
-@dataclass(frozen=True)
-class FoliageRules:
-    """The thresholds of ``in_foliage`` (its docstring says what each does)."""
-
-    window_m: float = 1.0
-    min_contrast: float = 4.0
-    min_sides: int = 5
-    margin_m: float = 0.5
 
 
 def in_foliage(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_tree=None,
@@ -171,14 +162,6 @@ def _span_frame(x, y, z, anchor, direction, wire_spans, margin_m: float):
     return s, lat, dz
 
 
-@dataclass(frozen=True)
-class SurfaceRules:
-    """The thresholds of ``in_a_surface`` (its docstring says what each does)."""
-
-    min_contrast: float = SURFACE_CONTRAST
-    reach_m: float = 1.5
-    margin_m: float = 0.5
-
 
 def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_wire, around_tree=None,
                  rules: SurfaceRules | None = None, **overrides) -> set:
@@ -208,22 +191,6 @@ def in_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz
         core_n[li], ring_n[li] = core_n.get(li, 0) + core, ring_n.get(li, 0) + ring
     return {li for li in core_n if core_n[li] + ring_n[li] and core_ring_contrast(core_n[li], ring_n[li]) < min_contrast}
 
-
-@dataclass(frozen=True)
-class AlongSurfaceRules:
-    """The thresholds of ``along_a_surface`` (its docstring says what each does)."""
-
-    reach_m: float = 3.0
-    inner_m: float = 0.5
-    tol_m: float = 0.1
-    slab_m: float = 0.5
-    max_slope_deg: float = 60.0
-    min_share: float = 0.7
-    bin_m: float = 0.25
-    min_fill: float = 0.7
-    min_cover: float = 0.5
-    min_points: int = 10
-    margin_m: float = 0.5
 
 
 def along_a_surface(spans, lines, px, py, pz, line_of, wire_of, max_rms, around_xyz, around_wire, around_tree=None,

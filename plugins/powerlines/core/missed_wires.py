@@ -4,12 +4,12 @@ sibling phases beside a fitted span."""
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from ..rules import ShortWireRules, SiblingRules
 from .catenaries import MAX_NEIGHBOUR_PAIRS, N_BEST_LINES, catenary, fit_catenary, fit_tolerance_m, line_fit
 from .spans import _spans_by_line
 from .wires_3d import _longest_run
@@ -66,17 +66,6 @@ def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m
                 near.remove(run)
     return out
 
-
-@dataclass(frozen=True)
-class ShortWireRules:
-    """The thresholds of ``short_wires`` (its docstring says what each does)."""
-
-    max_around: float = 0.5
-    reach_m: float = 5.0
-    structure_m: float = 1.5
-    stack_m: float = 1.5
-    max_stack_deg: float = 10.0
-    tol_m: float = 0.08
 
 
 def short_wires(xyz, off_ground, steep, wired, min_length_m, max_gap_m, n_searched: int | None = None,
@@ -286,21 +275,6 @@ def _stands_alone(q, around: _Around, max_around: float) -> bool:
     stacked = around.wire_like[near] & ((np.abs(rel @ across) <= around.plane_m) | (np.abs(up) <= around.plane_m))
     return int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= length) & ~stacked).sum()) < max_around * len(q)
 
-
-@dataclass(frozen=True)
-class SiblingRules:
-    """The thresholds of ``sibling_wires`` (its docstring says what each does)."""
-
-    max_sep_m: float = 4.0
-    max_dz_m: float = 3.0
-    bin_m: float = 0.1
-    tol_m: float = 0.15
-    min_points: int = 12
-    min_cover: float = 0.5
-    cover_bin_m: float = 2.0
-    max_rounds: int = 6
-    max_around: float = 0.5
-    plane_m: float = 0.16
 
 
 def sibling_wires(spans, lines, px, py, pz, max_rms, min_sep_m, min_span_m, owner=None, owner_length=None,

@@ -4,11 +4,11 @@ gaps bridged along one catenary."""
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..rules import GrowRules, NextSpanRules
 from .catenaries import WIRE_HEIGHT_RMS_M, catenary, fit_catenary, fit_tolerance_m, line_fit, median_line_fit
 from .clutter import _contrast, _on_spans
 from .wires_3d import _longest_run, _refined_trend, peel_catenaries
@@ -117,18 +117,6 @@ def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float =
     return line_of, wire_of
 
 
-@dataclass(frozen=True)
-class GrowRules:
-    """The thresholds of ``grow_span_ends`` (its docstring says what each does)."""
-
-    lateral_m: float = 0.25
-    column_m: float = 0.3
-    column_dz_m: float = 1.0
-    own_m: float = 4.0
-    support_m: float = 2.0
-    margin_m: float = 0.5
-    stack_m: float = 1.5
-
 
 def grow_span_ends(spans, lines, px, py, pz, free, max_rms, max_gap_m, reach_m, supports=None,
                    rules: GrowRules | None = None, **overrides):
@@ -231,19 +219,6 @@ def _stacked_at(sp, end, sign, line_spans, own_m: float, stack_m: float, across_
             return True
     return False
 
-
-@dataclass(frozen=True)
-class NextSpanRules:
-    """The thresholds of ``next_spans`` (its docstring says what each does; the stage gives
-    ``reach_m`` from S_min)."""
-
-    reach_m: float = 60.0
-    min_points: int = 12
-    lateral_m: float = 0.3
-    max_step_m: float = 0.5
-    max_rise_m: float = 3.0
-    min_contrast: float = 4.0
-    max_rounds: int = 4
 
 
 def next_spans(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_span_m: float,

@@ -11,6 +11,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..rules import PairRules, PassedThroughRules, PoleRules, TowerRules
 from .candidates import shape_classes
 
 
@@ -32,34 +33,6 @@ class Pylon:
         r, c = np.divmod(np.asarray(self.cells), cols)
         return float(np.hypot(x0 + (c + 0.5) * cell_m - self.x, y0 + (r + 0.5) * cell_m - self.y).max()) + cell_m
 
-
-@dataclass(frozen=True)
-class TowerRules:
-    """The thresholds of ``find_pylons`` (its docstring says what each does; the values were set
-    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
-
-    cell_m: float = 1.0
-    reach_m: float = 12.0
-    column_share: float = 0.5
-    end_radius_m: float = 10.0
-    max_side_m: float = 40.0
-    min_ends: int = 2
-    max_rugged: float = 0.7
-    min_slenderness: float = 2.0
-    under_line_m: float = 2.0
-    max_side_ratio: float = 2.0
-    along_deg: float = 10.0
-    max_height_share: float = 1.5
-    arm_m: float = 6.0
-    reach_down_share: float = 0.35
-    pole_area_m2: float = 4.0
-    over_wires_share: float = 1.2
-    over_wires_reach_down_share: float = 0.15
-    min_axis_share: float = 0.25
-    axis_area_m2: float = 12.0
-    pair_apart_m: float = 1.5
-    one_tower_m2: float = 100.0
-    peak_reach_m: float = 5.0
 
 
 def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top_share: float = 0.8,
@@ -276,20 +249,6 @@ def _shaped_candidates(g, span_ends, span_end_hag, top_share: float, r: TowerRul
     return shaped, owner, column, structure
 
 
-@dataclass(frozen=True)
-class PairRules:
-    """The thresholds of ``pole_pair`` (its docstring says what each does; ``find_pylons`` gives
-    ``min_share`` and ``apart_m`` from its own ``min_axis_share`` and ``pair_apart_m``)."""
-
-    min_share: float = 0.25
-    apart_m: float = 1.5
-    axis_m: float = 0.5
-    low_m: float = 3.0
-    head_m: float = 1.5
-    second_share: float = 0.5
-    min_points: int = 5
-    min_rise_share: float = 0.5
-
 
 def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, min_ends: int,
               rules: PairRules | None = None, **overrides):
@@ -487,29 +446,6 @@ def _tower_shaped(cells, g, column, r):
     return centre, 0.5 * float(np.ptp(pc, axis=0).max()) + cell_m, height
 
 
-@dataclass(frozen=True)
-class PassedThroughRules:
-    """The thresholds of ``find_towers_passed_through`` (its docstring says what each does; the values were set
-    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
-
-    cell_m: float = 1.0
-    reach_m: float = 12.0
-    column_share: float = 0.5
-    arm_m: float = 6.0
-    max_above_m: float = 2.0
-    max_side_m: float = 40.0
-    max_rugged: float = 0.7
-    min_slenderness: float = 2.0
-    known_m: float = 10.0
-    under_line_m: float = 2.0
-    margin_m: float = 10.0
-    max_side_ratio: float = 2.0
-    insulator_m: float = 1.0
-    reach_down_share: float = 0.5
-    pole_area_m2: float = 4.0
-    max_gap_m: float = 2.0
-    wide_reach_down_share: float = 0.35
-
 
 def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, known=(),
                                top_share: float = 0.8, rules: PassedThroughRules | None = None, **overrides) -> list:
@@ -602,23 +538,6 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
                            float(line_headings[int(np.argmin(dist))]), body, grid))
     return found
 
-
-@dataclass(frozen=True)
-class PoleRules:
-    """The thresholds of ``find_poles`` (its docstring says what each does; the values were set
-    on the synthetic variant family and the AHN4 / Oakland files, docs/powerlines.md, "Tower rules and the scenes that set them")."""
-
-    radius_m: float = 0.25
-    ring_m: float = 0.75
-    window_m: float = 2.0
-    min_thin_m: float = 2.5
-    min_fill: float = 0.6
-    wire_reach_m: float = 2.0
-    end_radius_m: float = 10.0
-    column_m: float = 0.45
-    voxel_m: float = 0.05
-    head_m: float = 1.8
-    max_ring_share: float = 0.6
 
 
 def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None, span_end_hag=None,

@@ -4,13 +4,13 @@ ribbons of wires side by side redrawn, twin lines, catenaries peeled one at a ti
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..rules import PeelRules, RibbonRules, WireRules
 from .bundles import _chain_pieces, split_bundles
 from .catenaries import (
     ISOLATION_M,
@@ -28,18 +28,6 @@ from .catenaries import (
 )
 from .clutter import _on_spans
 
-
-@dataclass(frozen=True)
-class WireRules:
-    """The thresholds of ``conductors_3d`` (its docstring says what each does; the stage gives
-    ``max_rms`` from its parameters)."""
-
-    min_points: int = 20
-    max_rms: float = np.inf
-    off_link: float = 0.25
-    reach: float | None = None
-    peel: bool = True
-    min_piece: float | None = None
 
 
 def conductors_3d(lines, px, py, pz, band: float, z_link: float, s_link: float, min_span: float, ground_z=None,
@@ -276,21 +264,6 @@ def alone_beside_wires(xyz, wire, free, reach_m: float = 0.5, near_m: float = 0.
     taken = np.flatnonzero(wire & (root != np.arange(len(xyz))))
     return taken, root[taken]
 
-
-@dataclass(frozen=True)
-class RibbonRules:
-    """The thresholds of ``ribbon_lines`` (its docstring says what each does)."""
-
-    min_gap_m: float = SIDE_BY_SIDE_MIN_GAP_M
-    max_angle_deg: float = 0.5
-    search_deg: float = 0.2
-    step_deg: float = 0.005
-    bin_m: float = 0.02
-    peak_m: float = 0.06
-    min_points: int = 20
-    match_m: float = 0.05
-    min_wires: int = 3
-    min_share: float = 0.75
 
 
 def ribbon_lines(lines, px, py, band_m, min_length_m, max_gap_m, rules: RibbonRules | None = None, **overrides):
@@ -623,17 +596,6 @@ def span_in_frame(sp: Span, line_from, line_to, conductor: int, wire: int) -> Sp
                                s_from=ends[0], s_to=ends[1], offset_slope=slope,
                                offset=o0 + sp.offset * cos - c0 * slope)
 
-
-@dataclass(frozen=True)
-class PeelRules:
-    """The thresholds of ``peel_catenaries`` (its docstring says what each does)."""
-
-    tol_m: float = 0.1
-    lateral_tol_m: float = WIRE_LATERAL_RMS_M
-    max_slope: float = 0.5
-    n_samples: int = 2000
-    max_tries: int = 32
-    seed: int = 0
 
 
 def peel_catenaries(s, z, off, min_points, min_span, max_rms, gap_m, rules: PeelRules | None = None, **overrides):
