@@ -7,6 +7,8 @@ from __future__ import annotations
 import toolbox
 from toolbox import Algorithm, Input, LayerMerge, Output, Parameter
 
+from .rules import CANDIDATES, PYLON_TOP_SHARE
+
 
 def _run(inputs, params, ctx):
     """The chain of ``stages`` (see its docstring), then the layers stage's result."""
@@ -115,13 +117,13 @@ PARAMETERS = [
               "distribution lines, transmission lines sit at 10-60 m; auto: up to the highest points "
               "(above the 99.95th percentile, those with two others within 2.5 m)", unit="m", minimum=0.0, maximum=1000.0, allow_auto=True),
     Parameter("first_returns_only", bool, True, "keep first returns only (ignored when the file has no return numbers)"),
-    Parameter("density_radius_m", float, 200.0, "surface density (first returns per occupied m²) measured "
+    Parameter("density_radius_m", float, CANDIDATES.density_radius_m, "surface density (first returns per occupied m²) measured "
               "around each candidate within this radius: a roof or crown neighbourhood must hold half of it "
               "within 1 m, sparse wires never do", unit="m", minimum=5.0, maximum=5000.0),
-    Parameter("neighbours", int, 12, "points in each shape (eigenvalue) neighbourhood", minimum=4, maximum=100),
-    Parameter("rugged_share", float, 0.04, "smallest-eigenvalue share above which a neighbourhood is "
+    Parameter("neighbours", int, CANDIDATES.neighbours, "points in each shape (eigenvalue) neighbourhood", minimum=4, maximum=100),
+    Parameter("rugged_share", float, CANDIDATES.rugged_share, "smallest-eigenvalue share above which a neighbourhood is "
               "vegetation", minimum=0.0, maximum=0.34),
-    Parameter("planar_share", float, 0.2, "middle-eigenvalue share above which a flat neighbourhood is a roof",
+    Parameter("planar_share", float, CANDIDATES.planar_share, "middle-eigenvalue share above which a flat neighbourhood is a roof",
               minimum=0.0, maximum=0.5),
     Parameter("cell_size_m", float, None, "top-hat mask cell; auto: band_m / 3 (0.13 m), so that conductors "
               "side by side band_m apart (bundles, three-phase ribbons) stay separate lines the top-hat keeps; "
@@ -173,7 +175,7 @@ PARAMETERS = [
               "up to 0.5 m from a wire's points as wire: the points its fits left out and a wire hanging "
               "beside it closer than the 2D step tells apart"),
     Parameter("max_rms_3d_m", float, 0.2, "largest RMS residual of a span's catenary", unit="m", minimum=0.0),
-    Parameter("pylon_top_share", float, 0.8, "a tower reaches at least this share of the height where the "
+    Parameter("pylon_top_share", float, PYLON_TOP_SHARE, "a tower reaches at least this share of the height where the "
               "spans ending at it are attached", minimum=0.1, maximum=2.0),
     Parameter("band_3d_m", float, 1.0, "half-width of the band around a 2D line whose points the 3D step "
               "splits into wires by height (conductors side by side at other heights are caught too)",

@@ -20,6 +20,100 @@ SIDE_BY_SIDE_MIN_GAP_M = 0.25
 # below this core-to-ring contrast (1.5 times a surface's 7) a line's points are a surface's
 SURFACE_CONTRAST = 10.5
 
+# the method's V_max, and how many median point spacings along a wire a gap may span before it
+# ends a run: 2.5 m is about 10 spacings on 10 pts/m2 ALS (and 36 on the method's 228 pts/m2), so
+# surveys as dense or denser keep the method's value and sparser ones scale it
+V_MAX_METHOD_M = 2.5
+GAP_SPACINGS = 10.0
+STANDS_CLEAR_MAX = 0.5  # other points within 0.5 m of a sparse second-pass wire's points, on average
+SETTLE_DRIFT_M = 0.02  # a plan line's drift off its wires' trend that its output is turned for
+# a tower found this close to a pole is the pole's (its span ends and a crown beside it)
+POLE_TAKES_M = 6.0
+# how far a pole's footprint reaches from its base at most (its cross arms, on the 1 m search
+# grid); a lattice tower's reaches 4-8 m
+POLE_FOOTPRINT_M = 3.0
+# a pole's column: within this of its base in plan (its radius and a street scan's lean of the
+# base towards the scanner) and more than POLE_HEAD_M under its top (its arms and top insulator)
+POLE_CORE_M = 0.3
+POLE_HEAD_M = 1.0
+# how far from a wire's points a point alone in the air is still taken for its: the closest two
+# wires of a line hang on their supports (a ribbon's or a joint-use pole's cables, 0.3-0.5 m)
+ALONE_REACH_M = 0.5
+# at most this many others within ALONE_AROUND_M of a point alone in the air: a dense scan's
+# crown points near a wire hold more (Oakland: most 20 or more)
+ALONE_AROUND_M = 1.0
+ALONE_MAX_AROUND = 8
+# tan 1 deg: a span runs along its line within 1 deg of it (as runs_along's lines)
+ALONG_SLOPE_MAX = 0.01746
+MIN_CANDIDATES = 10  # fewer candidates than this: no wire can be there (a field, a road)
+MIN_SECOND_PASS = 100  # wire-like points left on no wire that make a second pass worth its time
+GROW_FROM_M = 1.0  # spans grow into, and the cleaning looks at, points this far off the ground
+# the towers' share of the height where the spans ending at them are attached (the user's
+# pylon_top_share): a tower reaches its lowest attachment's height, its peak holds the earth wire
+PYLON_TOP_SHARE = 0.8
+# a point alone in the air beside a wire: at most 2 others within 0.4 m, taken over 3 rounds
+ALONE_NEAR_M = 0.4
+ALONE_MAX_NEAR = 2
+ALONE_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class CandidateRules:
+    """The ground stage's candidates: the top of the height window (``height_window_top``), the
+    surface density around them (``local_surface_density``) and the eigenvalue shape test
+    (``shape_classes``, with ``ribbons`` and ``tubes``); their docstrings say what each does. The
+    four the user may set are the plugin's parameters' defaults (neighbours, rugged_share,
+    planar_share, density_radius_m)."""
+
+    # the method's pre-classification (METHODS.md §1), its shares as LAStools' planar/rugged tests
+    neighbours: int = 12
+    rugged_share: float = 0.04
+    planar_share: float = 0.2
+    # a linear neighbourhood whose axis rises over 0.7 (35 degrees) is a pole's or a leg's
+    max_axis_slope: float = 0.7
+    # the window's top: above the 99.95th percentile only points with 2 others within V_max count
+    # (an earth wire over a stack, a tower top; a bird or a lone return has none)
+    window_quantile: float = 99.95
+    window_min_links: int = 2
+    # the survey's surface density within 200 m of a point (strips, overlaps and a mobile scan's
+    # falling range count where they are), on 1 m cells
+    density_radius_m: float = 200.0
+    density_cell_m: float = 1.0
+    # a ribbon (phases side by side): bands of 0.05 m bins, each at most 0.4 m wide, bins under 5 %
+    # of the fullest empty (a cross arm joins them at a pole); sets of 20 points or more, judged in
+    # 10 m pieces where linked to a crown (AHN4's and the family's ribbons and bundles)
+    ribbon_bin_m: float = 0.05
+    ribbon_max_band_m: float = 0.4
+    ribbon_floor_share: float = 0.05
+    min_set_points: int = 20
+    piece_m: float = 10.0
+    # a bundle (sub-conductors 0.4-0.6 m apart): within 1 m across and in height over 5 m
+    tube_max_width_m: float = 1.0
+    tube_min_length_m: float = 5.0
+
+
+CANDIDATES = CandidateRules()
+
+
+@dataclass(frozen=True)
+class SpanCutRules:
+    """Where a wire is cut into spans (``split_spans``, ``kink_cut``; their docstrings say how)."""
+
+    # slopes from least-squares lines over 10 m each side; a drop in slope of 0.02 is an
+    # attachment, 0.005 when one catenary does not fit the piece (looked at again, more sensitively)
+    window_m: float = 10.0
+    min_drop: float = 0.02
+    fine_min_drop: float = 0.005
+    # a rise in slope beyond what the slackest wire gives (catenary parameter 100 m) is a kink too:
+    # a span climbing an embankment from a pole at its foot
+    min_c_m: float = 100.0
+    # two parabolas a cut apart (cuts 1 m apart) must fit 1.5 times better than one
+    kink_step_m: float = 1.0
+    kink_min_gain: float = 1.5
+
+
+SPAN_CUTS = SpanCutRules()
+
 
 @dataclass(frozen=True)
 class WireRules:
@@ -144,6 +238,9 @@ class TowerRules:
     pair_apart_m: float = 1.5
     one_tower_m2: float = 100.0
     peak_reach_m: float = 5.0
+
+
+TOWERS = TowerRules()
 
 
 @dataclass(frozen=True)

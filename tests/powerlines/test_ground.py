@@ -23,10 +23,10 @@ def test_the_height_window_reaches_a_sparse_earth_wire_and_not_a_bird():
     wire = np.column_stack([s, np.zeros_like(s), 35.3 + 2.7 * ((s - 92.5) / 92.5) ** 2])
     bird = np.array([[90.0, 3.0, 68.0]])
     xyz = np.r_[low, wire, bird]
-    top = height_window_top(xyz[:, 2], xyz)
+    top = height_window_top(xyz[:, 2], xyz, link_m=2.5)  # the method's V_max
     assert 38.0 <= top <= 39.5
     assert np.percentile(xyz[:, 2], 99.95) + 1 < 37.0  # what the percentile alone kept
-    assert height_window_top(np.r_[low, bird][:, 2], np.r_[low, bird]) < 30.0
+    assert height_window_top(np.r_[low, bird][:, 2], np.r_[low, bird], link_m=2.5) < 30.0
 
 
 

@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 
 from toolbox.neighbourhoods import neighbourhood_covariances, principal_axes, symmetric3_eigenvalues
 
+from ..rules import CANDIDATES
 from .catenaries import line_fit
 
 MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense (mobile) scans
@@ -18,7 +19,8 @@ MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense 
 DENSITY_BLOCK_M = 5.0  # the density's window moves in blocks of this size (cells of 1 m inside)
 
 
-def height_window_top(hag, xyz, quantile: float = 99.95, link_m: float = 2.5, min_links: int = 2) -> float:
+def height_window_top(hag, xyz, link_m: float, quantile: float = CANDIDATES.window_quantile,
+                      min_links: int = CANDIDATES.window_min_links) -> float:
     """Highest height above ground the candidates reach, birds and lone returns left out.
 
     Above the 99.95th percentile of ``hag`` only points with ``min_links`` others within ``link_m``
@@ -40,7 +42,8 @@ def height_window_top(hag, xyz, quantile: float = 99.95, link_m: float = 2.5, mi
     return top + 1.0
 
 
-def local_surface_density(x, y, weight=None, radius_m: float = 200.0, cell_m: float = 1.0,
+def local_surface_density(x, y, weight=None, radius_m: float = CANDIDATES.density_radius_m,
+                          cell_m: float = CANDIDATES.density_cell_m,
                           block_m: float = DENSITY_BLOCK_M) -> np.ndarray:
     """Per point: the points (``weight``: those that count, e.g. first returns) per occupied
     ``cell_m`` square in the blocks of ``block_m`` within ``radius_m`` (rounded up to whole
@@ -80,8 +83,9 @@ def local_surface_density(x, y, weight=None, radius_m: float = 200.0, cell_m: fl
     return density.ravel()[block] / (cell * cell)
 
 
-def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0.04, planar_share: float = 0.2,
-                  surface_density: float | None = None, max_axis_slope: float = 0.7):
+def shape_classes(xyz: np.ndarray, neighbours: int = CANDIDATES.neighbours, rugged_share: float = CANDIDATES.rugged_share,
+                  planar_share: float = CANDIDATES.planar_share, surface_density: float | None = None,
+                  max_axis_slope: float = CANDIDATES.max_axis_slope):
     """(linear, planar, rugged, steep) masks from the normalised eigenvalues of each
     k-neighbourhood; steep: otherwise linear along a steep axis (poles, tower legs, and wire
     points whose neighbourhood leans on a pole top).
@@ -157,8 +161,9 @@ def shape_classes(xyz: np.ndarray, neighbours: int = 12, rugged_share: float = 0
     return linear, planar, rugged, steep & ~planar & ~rugged
 
 
-def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.05, max_band_m: float = 0.4,
-            min_points: int = 20, floor_share: float = 0.05, piece_m: float = 10.0):
+def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = CANDIDATES.ribbon_bin_m,
+            max_band_m: float = CANDIDATES.ribbon_max_band_m, min_points: int = CANDIDATES.min_set_points,
+            floor_share: float = CANDIDATES.ribbon_floor_share, piece_m: float = CANDIDATES.piece_m):
     """Planar points that belong to a ribbon of wires side by side (a compact line's phases, a
     bundle): locally flat like a roof, but the set they form (with the ``smooth`` points linked
     to them within ``link``, through the k-neighbourhoods ``idx``/``dist``), projected across its
@@ -183,8 +188,9 @@ def ribbons(xyz, idx, dist, planar, smooth, link: float = 1.0, bin_m: float = 0.
     return out & planar
 
 
-def tubes(xyz, idx, dist, rugged, smooth, link: float = 1.0, max_width_m: float = 1.0, min_points: int = 20,
-          piece_m: float = 10.0, min_length_m: float = 5.0):
+def tubes(xyz, idx, dist, rugged, smooth, link: float = 1.0, max_width_m: float = CANDIDATES.tube_max_width_m,
+          min_points: int = CANDIDATES.min_set_points, piece_m: float = CANDIDATES.piece_m,
+          min_length_m: float = CANDIDATES.tube_min_length_m):
     """Rugged points that belong to a bundle of sub-conductors (a triangle or a square of wires
     0.4-0.6 m apart): volumetric in a small neighbourhood, but the set they form (with the
     ``smooth`` points linked to them within ``link``), taken in ``piece_m`` pieces along its main

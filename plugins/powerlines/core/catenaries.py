@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rules import SIDE_BY_SIDE_MIN_GAP_M, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
+from ..rules import SIDE_BY_SIDE_MIN_GAP_M, SPAN_CUTS, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
 
 # the least lateral tolerance of a wire's points about its trend, whatever their measured
 # scatter: a few centimetres of ranging noise on either side
@@ -225,7 +225,8 @@ def fit_catenary(s, z):
     return float(z0), float(s0), float(np.exp(lc)), rms
 
 
-def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float = 0.02, min_c_m: float = 100.0):
+def split_spans(s, z, min_span: float, window_m: float = SPAN_CUTS.window_m, min_drop: float = SPAN_CUTS.min_drop,
+                min_c_m: float = SPAN_CUTS.min_c_m):
     """Cut positions along a wire at its attachment points. Along one catenary the slope only
     grows; where the slope drops (rising on the left, falling on the right) the wire passes an
     attachment point; so does a rise in slope far steeper than a catenary's (see below). Slopes
@@ -268,7 +269,8 @@ def split_spans(s, z, min_span: float, window_m: float = 10.0, min_drop: float =
     return sorted(cuts)
 
 
-def kink_cut(s, z, min_span: float, step_m: float = 1.0, min_gain: float = 1.5, min_drop: float = 0.02):
+def kink_cut(s, z, min_span: float, step_m: float = SPAN_CUTS.kink_step_m, min_gain: float = SPAN_CUTS.kink_min_gain,
+             min_drop: float = SPAN_CUTS.min_drop):
     """Where along a piece of wire that one catenary fits, two fit it markedly better: an
     attachment the wire runs through that ``split_spans``' slope windows missed (a suspension
     tower hiding the wire's points; 60 m spans' small kinks). Parabolas (a catenary's first-order form) left and

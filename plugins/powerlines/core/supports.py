@@ -11,7 +11,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..rules import PairRules, PassedThroughRules, PoleRules, TowerRules
+from ..rules import POLE_CORE_M, POLE_HEAD_M, PYLON_TOP_SHARE, PairRules, PassedThroughRules, PoleRules, TowerRules
 from .candidates import shape_classes
 
 
@@ -35,7 +35,7 @@ class Pylon:
 
 
 
-def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top_share: float = 0.8,
+def find_pylons(x, y, hag, span_ends, span_end_hag, line_headings, lines_xy, top_share: float = PYLON_TOP_SHARE,
                 span_lines=None, passed_by: list | None = None, wire_xyh=None, rules: TowerRules | None = None,
                 **overrides):
     """Towers that carry the conductors: tall structures under the lines where spans end.
@@ -448,7 +448,7 @@ def _tower_shaped(cells, g, column, r):
 
 
 def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, known=(),
-                               top_share: float = 0.8, rules: PassedThroughRules | None = None, **overrides) -> list:
+                               top_share: float = PYLON_TOP_SHARE, rules: PassedThroughRules | None = None, **overrides) -> list:
     """Towers the wires run through without a span ending there, from the towers' own points: a
     suspension tower where one catenary fits the wire across it (short spans on a slope: the
     kink at its insulators is within the noise), which ``find_pylons`` cannot see.
@@ -541,7 +541,7 @@ def find_towers_passed_through(x, y, hag, wire_x, wire_y, wire_hag, line_heading
 
 
 def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, span_ends=None, span_end_hag=None,
-               top_share: float = 0.8, rules: PoleRules | None = None, **overrides) -> list[Pylon]:
+               top_share: float = PYLON_TOP_SHARE, rules: PoleRules | None = None, **overrides) -> list[Pylon]:
     """Poles that carry the wires: thin vertical columns, as a street scanner sees wooden and
     steel poles (a crown beside the pole is no part of it, a tree trunk ends in its crown).
 
@@ -672,7 +672,7 @@ def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
     return inside
 
 
-def in_pole_columns(poles_xyh, x, y, hag, core_m: float = 0.3, head_m: float = 1.0) -> np.ndarray:
+def in_pole_columns(poles_xyh, x, y, hag, core_m: float = POLE_CORE_M, head_m: float = POLE_HEAD_M) -> np.ndarray:
     """Which points (x, y: plan metres, hag: height above ground) lie in a pole's column: within
     ``core_m`` in plan of its base (``poles_xyh``: (n, 3) base x, y and height above ground) and
     more than ``head_m`` under its top. Nothing hangs there but what is fixed to the pole: a

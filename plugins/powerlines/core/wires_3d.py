@@ -10,7 +10,8 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..rules import PeelRules, RibbonRules, WireRules
+from ..rules import (ALONE_AROUND_M, ALONE_MAX_AROUND, ALONE_MAX_NEAR, ALONE_NEAR_M, ALONE_REACH_M, ALONE_ROUNDS,
+                     SPAN_CUTS, STANDS_CLEAR_MAX, PeelRules, RibbonRules, WireRules)
 from .bundles import _chain_pieces, split_bundles
 from .catenaries import (
     ISOLATION_M,
@@ -137,7 +138,7 @@ def _fit_pieces(piece, li, wire, next_wire: int, out, min_span: float, s_link: f
                 continue
         if fit[3] > max_rms:
             # one catenary does not fit: look again for an attachment point, more sensitively
-            finer = split_spans(sk[sel], zk[sel], min_span, min_drop=0.005)
+            finer = split_spans(sk[sel], zk[sel], min_span, min_drop=SPAN_CUTS.fine_min_drop)
             if not finer:  # no slope evidence (points missing at the pole): the widest gap
                 ss_ = np.sort(sk[sel])
                 gaps = np.diff(ss_)
@@ -218,7 +219,7 @@ def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: 
     return whole, whole_fit, gone
 
 
-def stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
+def stands_clear(xyz, run, radius_m: float, max_around: float = STANDS_CLEAR_MAX) -> bool:
     """Whether the points ``run`` (indices into ``xyz``) have on average at most ``max_around``
     other points of ``xyz`` within ``radius_m`` each."""
     others = np.setdiff1d(np.arange(len(xyz)), run)
@@ -228,8 +229,9 @@ def stands_clear(xyz, run, radius_m: float, max_around: float = 0.5) -> bool:
     return float(np.mean(around)) <= max_around
 
 
-def alone_beside_wires(xyz, wire, free, reach_m: float = 0.5, near_m: float = 0.4, max_near: int = 2,
-                       around_m: float = 1.0, max_around: int = 8, rounds: int = 3, tree=None):
+def alone_beside_wires(xyz, wire, free, reach_m: float = ALONE_REACH_M, near_m: float = ALONE_NEAR_M,
+                       max_near: int = ALONE_MAX_NEAR, around_m: float = ALONE_AROUND_M,
+                       max_around: int = ALONE_MAX_AROUND, rounds: int = ALONE_ROUNDS, tree=None):
     """The points ``free`` (mask over ``xyz``, metres) within ``reach_m`` of a point of ``wire``
     (mask) that stand alone in the air: at most ``max_near`` other points that are not wire within
     ``near_m`` and ``max_around`` within ``around_m``. They are the wire points its fits left out

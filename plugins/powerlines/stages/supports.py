@@ -14,6 +14,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from ..core import catenary, find_poles, find_pylons, find_towers_passed_through, grow_span_ends, pylon_points
+from ..rules import TOWERS
 from ..settings import POLE_FOOTPRINT_M, POLE_TAKES_M, Rules
 from ..state import CandidateLabels, State, Supports, Wires
 from ..wire_sets import keep_conductors
@@ -32,10 +33,12 @@ def stage(scene, st: State, settings, ctx) -> State:
                                            rules=settings.rules)
     with_arms, own_arms = [], []
     wire_ends = fitted_wire_ends(geo, spans, params["max_rms_3d_m"])
-    arms = arm_lines(lines["conductors"], found, hu, with_arms=with_arms, wire_ends=wire_ends)
+    arms = arm_lines(lines["conductors"], found, hu, settings.rules.towers.end_radius_m, with_arms=with_arms,
+                     wire_ends=wire_ends)
     # a tower the wires run through (a suspension tower where the 3D step did not cut them) has
     # more spans past it than ending at it, as a tree has; a line that never leaves it is its arm
-    arms |= arm_lines(lines["conductors"], passed_by, hu, with_arms=own_arms, own_only=True, wire_ends=wire_ends)
+    arms |= arm_lines(lines["conductors"], passed_by, hu, settings.rules.towers.end_radius_m, with_arms=own_arms,
+                      own_only=True, wire_ends=wire_ends)
     if arms:
         kept = [i for i in range(len(geo)) if i not in arms]
         lines, geo, spans, line_of, wire_of_pt = keep_conductors(kept, lines, geo, spans, line_of, wire_of_pt)
@@ -143,7 +146,7 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
     return gdf, tower, found
 
 
-def arm_lines(cond, found, hu, end_radius_m: float = 10.0, min_angle_deg: float = 45.0, with_arms=None,
+def arm_lines(cond, found, hu, end_radius_m: float = TOWERS.end_radius_m, min_angle_deg: float = 45.0, with_arms=None,
           own_only: bool = False, wire_ends=None) -> set:
     """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
     ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
