@@ -116,6 +116,77 @@ SPAN_CUTS = SpanCutRules()
 
 
 @dataclass(frozen=True)
+class SurfaceRowRules:
+    """A span in a surface (``span_on_surface``, ``pieces_on_surfaces``): a roof's scan row or an
+    eave, seen by a mobile scanner as a thin straight line (docs/powerlines.md, "Not wires:
+    surfaces, crowns lined up")."""
+
+    # the cross-section within 2 m of the span; a surface's line: points within 0.1 m of it fill
+    # every 0.25 m bin out to 1.5 m on one side (four wires 0.4 m apart span 1.2 m with gaps),
+    # each along 0.3 of the span (a pole or a cross arm holds a few metres of it, not a third)
+    reach_m: float = 2.0
+    line_m: float = 0.1
+    bin_m: float = 0.25
+    min_run_m: float = 1.5
+    min_cover: float = 0.3
+    # directions up to 70 degrees off level either way (90: a wall's side whose top edge is the span)
+    max_tilt_deg: float = 70.0
+    # a span's own points (within 0.15 m across: a wire's lateral rms) in pieces cut at 2 m gaps,
+    # each in a surface of its own (a short wire along the top edges of two roofs a street apart)
+    piece_gap_m: float = 2.0
+    piece_lateral_m: float = 0.15
+
+
+SURFACE_ROWS = SurfaceRowRules()
+
+
+@dataclass(frozen=True)
+class StraightRunRules:
+    """Straight 3D runs (``straight_wires``): wires seen over a few metres, whose sag there is
+    millimetres; and those leading from a found pole (``wires_from_poles``), docs/powerlines.md
+    "Wires too short for the Hough: short wires, pole wires"."""
+
+    # points within 8 cm of the line (a wire's scatter in a mobile scan), 12 or more, rising at
+    # most 0.5 (steeper is a pole); 300 RANSAC draws per set
+    tol_m: float = 0.08
+    min_points: int = 12
+    max_slope: float = 0.5
+    n_samples: int = 300
+    # from a pole: the nearer end within 5 m of its axis in plan, continued toward it passing within
+    # 1.8 m of the axis (a cross arm's reach); on average at most 0.5 other points around its points
+    pole_reach_m: float = 5.0
+    pole_head_m: float = 1.8
+    pole_max_around: float = 0.5
+
+
+STRAIGHT_RUNS = StraightRunRules()
+
+
+@dataclass(frozen=True)
+class TowerShapeRules:
+    """A tower's body (``axis_share``, ``_base_cells``, ``pylon_points``) and its arms
+    (``arm_lines``), docs/powerlines.md "Towers and poles"."""
+
+    # a pole is one thin column: the share of the points within 2 m in plan, from 3 m over the
+    # ground to 1.5 m under its top (under the arms), within 0.5 m of one vertical
+    axis_radius_m: float = 2.0
+    axis_m: float = 0.5
+    axis_low_m: float = 3.0
+    axis_head_m: float = 1.5
+    # the base leaves out the cells without structure more than 2.5 m from the column along the
+    # line (within 30 degrees of it): a stack of wires running off a pole's top
+    base_reach_m: float = 2.5
+    base_along_deg: float = 30.0
+    # a tower's points hang together from its top down: below a gap of 2 m stand fences and bushes
+    max_gap_m: float = 2.0
+    # a short line crossing a longer one at a tower at 45 degrees or more is its arm
+    arm_min_angle_deg: float = 45.0
+
+
+TOWER_SHAPE = TowerShapeRules()
+
+
+@dataclass(frozen=True)
 class WireRules:
     """The thresholds of ``conductors_3d`` (its docstring says what each does; the stage gives
     ``max_rms`` from its parameters)."""

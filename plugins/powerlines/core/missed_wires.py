@@ -9,14 +9,15 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from ..rules import ShortWireRules, SiblingRules
+from ..rules import STRAIGHT_RUNS, ShortWireRules, SiblingRules
 from .catenaries import MAX_NEIGHBOUR_PAIRS, N_BEST_LINES, catenary, fit_catenary, fit_tolerance_m, line_fit
 from .spans import _spans_by_line
 from .wires_3d import _longest_run
 
 
-def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m: float = 0.08, min_points: int = 12,
-                   max_slope: float = 0.5, link_m: float = 1.0, n_samples: int = 300, seed: int = 0) -> list[np.ndarray]:
+def straight_wires(xyz: np.ndarray, min_length_m: float, max_gap_m: float, tol_m: float = STRAIGHT_RUNS.tol_m,
+                   min_points: int = STRAIGHT_RUNS.min_points, max_slope: float = STRAIGHT_RUNS.max_slope,
+                   link_m: float = 1.0, n_samples: int = STRAIGHT_RUNS.n_samples, seed: int = 0) -> list[np.ndarray]:
     """Straight 3D runs of points (indices into ``xyz``, metres): wires seen over
     a few metres only, such as a mobile scanner's view of a wire crossing its street, too short
     for the 2D Hough's S_min and not collinear in plan with their neighbours (wires fanning out
@@ -157,8 +158,10 @@ def _joins(q, wires_tree, structure_tree, reach_m: float, structure_m: float) ->
 
 
 def wires_from_poles(xyz: np.ndarray, poles: np.ndarray, off_ground: np.ndarray, min_length_m: float,
-                     max_gap_m: float, wire_like: np.ndarray | None = None, reach_m: float = 5.0,
-                     head_m: float = 1.8, max_around: float = 0.5, tol_m: float = 0.08) -> list[np.ndarray]:
+                     max_gap_m: float, wire_like: np.ndarray | None = None,
+                     reach_m: float = STRAIGHT_RUNS.pole_reach_m, head_m: float = STRAIGHT_RUNS.pole_head_m,
+                     max_around: float = STRAIGHT_RUNS.pole_max_around,
+                     tol_m: float = STRAIGHT_RUNS.tol_m) -> list[np.ndarray]:
     """The straight runs (``straight_wires``, ``tol_m``) of at least ``min_length_m`` among
     ``xyz`` (wire-like points on no wire or support) that lead from a pole found: a wire seen
     over a few metres where it leaves its pole, too short for ``short_wires`` (which has only

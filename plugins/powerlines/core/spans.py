@@ -8,15 +8,16 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..rules import GrowRules, NextSpanRules
+from ..rules import SURFACE_ROWS, GrowRules, NextSpanRules
 from .catenaries import WIRE_HEIGHT_RMS_M, catenary, fit_catenary, fit_tolerance_m, line_fit, median_line_fit
 from .clutter import _contrast, _on_spans
 from .wires_3d import _longest_run, _refined_trend, peel_catenaries
 
 
-def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0, bin_m: float = 0.25,
-                    min_run_m: float = 1.5, line_m: float = 0.1, max_tilt_deg: float = 70.0,
-                    min_cover: float = 0.3, min_tilt_deg: float = 0.0) -> bool:
+def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = SURFACE_ROWS.reach_m,
+                    bin_m: float = SURFACE_ROWS.bin_m, min_run_m: float = SURFACE_ROWS.min_run_m,
+                    line_m: float = SURFACE_ROWS.line_m, max_tilt_deg: float = SURFACE_ROWS.max_tilt_deg,
+                    min_cover: float = SURFACE_ROWS.min_cover, min_tilt_deg: float = 0.0) -> bool:
     """Whether a span lies in a surface: a scan row on a roof or the edge of an eave, which a
     mobile scanner sees as a thin straight line at a range where the surface is too sparse to
     count as one. ``s``, ``off``, ``dz``: candidate points along the line, across it and in
@@ -56,7 +57,8 @@ def span_on_surface(s, off, dz, s_from: float, s_to: float, reach_m: float = 2.0
     return False
 
 
-def pieces_on_surfaces(s, off, dz, sp, gap_m: float = 2.0, lateral_m: float = 0.15) -> float:
+def pieces_on_surfaces(s, off, dz, sp, gap_m: float = SURFACE_ROWS.piece_gap_m,
+                       lateral_m: float = SURFACE_ROWS.piece_lateral_m) -> float:
     """The share of the span ``sp``'s own points (``s`` along its line, ``off`` across and ``dz``
     over its curve, as for span_on_surface) that lie in pieces, cut where its points leave gaps
     over ``gap_m``, each in a surface of its own: a short wire found along the top edges of two

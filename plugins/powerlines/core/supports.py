@@ -11,7 +11,8 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..rules import POLE_CORE_M, POLE_HEAD_M, PYLON_TOP_SHARE, PairRules, PassedThroughRules, PoleRules, TowerRules
+from ..rules import (POLE_CORE_M, POLE_HEAD_M, PYLON_TOP_SHARE, TOWER_SHAPE, PairRules, PassedThroughRules, PoleRules,
+                     TowerRules)
 from .candidates import shape_classes
 
 
@@ -298,8 +299,9 @@ def pole_pair(x, y, hag, flat, body, height: float, ends_xy, ends_hag, centres, 
     return out
 
 
-def axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: float = 0.5, low_m: float = 3.0,
-                head_m: float = 1.5):
+def axis_share(x, y, hag, cx, cy, height: float, radius_m: float = TOWER_SHAPE.axis_radius_m,
+               axis_m: float = TOWER_SHAPE.axis_m, low_m: float = TOWER_SHAPE.axis_low_m,
+               head_m: float = TOWER_SHAPE.axis_head_m):
     """The share of the points within ``radius_m`` of (``cx``, ``cy``) in plan, from ``low_m``
     above ground to ``head_m`` under ``height`` (under a pole's arms), that lie within ``axis_m``
     of the vertical through the densest of them (the most such points within ``axis_m``), and
@@ -315,8 +317,8 @@ def axis_share(x, y, hag, cx, cy, height: float, radius_m: float = 2.0, axis_m: 
     return float(within.max()) / len(near), len(near)
 
 
-def _base_cells(cells, column, n_layers, centres, heading_rad: float, reach_m: float = 2.5,
-                along_deg: float = 30.0) -> np.ndarray:
+def _base_cells(cells, column, n_layers, centres, heading_rad: float, reach_m: float = TOWER_SHAPE.base_reach_m,
+                along_deg: float = TOWER_SHAPE.base_along_deg) -> np.ndarray:
     """The cells of a tower's candidate its base is taken from: all but those with no structure
     (under 3 layers, see ``_tower_grid``) more than ``reach_m`` from its column cells along the
     line it carries (within ``along_deg`` of ``heading_rad``): a stack of wires the line search
@@ -652,7 +654,7 @@ def _grow_body(cells, structure, centres, centre, reach_m):
     return np.flatnonzero(grown.ravel())
 
 
-def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = 2.0):
+def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = TOWER_SHAPE.max_gap_m):
     """Points inside the tower's footprint cells (on the grid it was found on); with ``hag``
     (heights above ground) only those of the structure hanging together from its top down: below
     the first gap of more than ``max_gap_m`` stand fences, bushes and cabinets at its foot."""

@@ -14,7 +14,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from ..core import catenary, find_poles, find_pylons, find_towers_passed_through, grow_span_ends, pylon_points
-from ..rules import TOWERS
+from ..rules import TOWER_SHAPE, TOWERS
 from ..settings import POLE_FOOTPRINT_M, POLE_TAKES_M, Rules
 from ..state import CandidateLabels, State, Supports, Wires
 from ..wire_sets import keep_conductors
@@ -146,7 +146,8 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
     return gdf, tower, found
 
 
-def arm_lines(cond, found, hu, end_radius_m: float = TOWERS.end_radius_m, min_angle_deg: float = 45.0, with_arms=None,
+def arm_lines(cond, found, hu, end_radius_m: float = TOWERS.end_radius_m,
+              min_angle_deg: float = TOWER_SHAPE.arm_min_angle_deg, with_arms=None,
           own_only: bool = False, wire_ends=None) -> set:
     """Conductors whose both ends lie within a tower's reach (its footprint, and at least the
     ``end_radius_m`` within which find_pylons counts span ends as its) and that cross a longer
