@@ -1,8 +1,8 @@
 """The house rules (#76), measured on the source: no function over 150 lines, no power-line function
 with more than 12 parameters, no plugin file over 1,200 lines, and the host holding no algorithm.
 ``DEBT`` lists what is still over a limit; it may only shrink (an entry no longer over fails too,
-so the list follows the code). The power-line code's tuning values live in its ``rules.py``: a
-literal numeric default in a signature there is counted, and the count may only fall."""
+so the list follows the code). The power-line chain's tuning values live in its ``rules.py``: no
+signature in the chain holds a literal numeric default."""
 
 from __future__ import annotations
 
@@ -16,9 +16,6 @@ MAX_POWERLINE_PARAMETERS = 12
 MAX_PLUGIN_FILE_LINES = 1200
 # (file, function): what is over a limit today, to be split (#76)
 DEBT: set = set()
-# literal numeric defaults (other than 0 and 1) in the power-line code's signatures, to move into
-# rules.py (#76); lower it as they move: the test fails when there are more, or fewer
-POWERLINE_LITERAL_DEFAULTS = 29
 
 
 def _functions():
@@ -77,13 +74,17 @@ def test_rule_objects_unpack_in_their_fields_order():
     assert checked >= 11
 
 
-def test_powerline_tuning_values_move_into_rules_and_never_back():
+def test_powerline_tuning_values_are_in_rules_only():
+    """A literal numeric default (other than 0 and 1) in a signature of the chain is a tuning value
+    outside ``rules.py`` (#76). ``evaluation.py`` is left out: how a result is matched to the
+    truth, not the chain."""
     found = []
     for path in sorted((ROOT / "plugins" / "powerlines").rglob("*.py")):
+        if path.name == "evaluation.py":
+            continue
         for fn in (n for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.FunctionDef)):
             a = fn.args
             pairs = list(zip(a.args[len(a.args) - len(a.defaults):], a.defaults)) + list(zip(a.kwonlyargs, a.kw_defaults))
             found += [f"{path.name}:{fn.name}({arg.arg})" for arg, d in pairs
                       if isinstance(d, ast.Constant) and type(d.value) in (int, float) and d.value not in (0, 1)]
-    assert len(found) <= POWERLINE_LITERAL_DEFAULTS, f"new literal defaults: move them into rules.py ({found})"
-    assert len(found) == POWERLINE_LITERAL_DEFAULTS, f"{len(found)} left: lower POWERLINE_LITERAL_DEFAULTS"
+    assert found == [], f"literal defaults: move them into rules.py ({found})"

@@ -26,6 +26,7 @@ SURFACE_CONTRAST = 10.5
 V_MAX_METHOD_M = 2.5
 GAP_SPACINGS = 10.0
 STANDS_CLEAR_MAX = 0.5  # other points within 0.5 m of a sparse second-pass wire's points, on average
+STANDS_CLEAR_RADIUS_M = 0.5
 SETTLE_DRIFT_M = 0.02  # a plan line's drift off its wires' trend that its output is turned for
 # a tower found this close to a pole is the pole's (its span ends and a crown beside it)
 POLE_TAKES_M = 6.0
@@ -51,6 +52,9 @@ GROW_FROM_M = 1.0  # spans grow into, and the cleaning looks at, points this far
 # the towers' share of the height where the spans ending at them are attached (the user's
 # pylon_top_share): a tower reaches its lowest attachment's height, its peak holds the earth wire
 PYLON_TOP_SHARE = 0.8
+# a wire is a concentration of points: at least 4 times denser within 0.1 m than 0.2-0.5 m around
+# (a crown's points that happen to line up are not; a next span's points are)
+WIRE_CONTRAST = 4.0
 # a point alone in the air beside a wire: at most 2 others within 0.4 m, taken over 3 rounds
 ALONE_NEAR_M = 0.4
 ALONE_MAX_NEAR = 2
@@ -187,6 +191,96 @@ TOWER_SHAPE = TowerShapeRules()
 
 
 @dataclass(frozen=True)
+class SpanPointRules:
+    """Which points are a fitted span's (``points_on_spans``, the 3D step's ``_pick_up``,
+    ``off_their_spans``, ``bridge_gaps``) and the stack and clump tests of the span searches
+    (``_stacked_at``, ``_clumped``), docs/powerlines.md "Each wire's points: grown, foliage taken
+    off" and "Phases too sparse to find alone, stacks, next spans, gaps"."""
+
+    # a point is on a span within 0.25 m of its plan position (the shape test's leftovers next to a
+    # pole top) and within 0.5 m inside the 3D step's own band (a sub-conductor seen a few times)
+    on_span_m: float = 0.25
+    pick_up_m: float = 0.5
+    # a wire point off its trend is foliage where another point off the ground is within 0.3 m
+    # (the span at its position taken within 0.5 m of the span's extent)
+    clutter_m: float = 0.3
+    clutter_margin_m: float = 0.5
+    # another wire within 0.5 m in plan hangs over or under a span's end: a stack
+    stack_across_m: float = 0.5
+    # more than half a piece's points within one window: a pole's or a crown's blob
+    clump_share: float = 0.5
+    # one catenary over a gap is compared with the pieces' own every 0.5 m
+    gap_sample_m: float = 0.5
+
+
+SPAN_POINTS = SpanPointRules()
+
+
+@dataclass(frozen=True)
+class FitSearchRules:
+    """The 3D step's searches inside a line's band (``conductors_3d``'s helpers, ``twin_lines``,
+    ``split_bundles``), docs/powerlines.md "A conductor is a wire in 3D" and "Bundles and ribbons"."""
+
+    # a sparse wire is its longest run with the band's points on its catenary where it hangs gently
+    # (slope at most 0.5), and the wires 90 % of whose points lie on it
+    sparse_max_slope: float = 0.5
+    sparse_wire_share: float = 0.9
+    # catenary hypotheses along the line: 8 draws per first point, the middle one within 0.3 m of
+    # the chord (a sparse wire over a tree is a few percent of its band)
+    triple_draws: int = 8
+    triple_chord_m: float = 0.3
+    # lines within 0.5 degrees of each other whose bands share a wire are twins (a ribbon's lines
+    # drawn between its phases)
+    twin_max_angle_deg: float = 0.5
+    # a bundle split 3 times at most (a square: 4 sub-conductors), heights about a running mean over
+    # 5 m (a span's sag is smooth at that scale); wire trends refitted over 4 rounds, up to 4 groups
+    bundle_depth: int = 3
+    bundle_window_m: float = 5.0
+    bundle_rounds: int = 4
+    bundle_max_groups: int = 4
+    # pieces chained across a gap by their end slopes over 10 m (a wire rises to a pole, falls after)
+    chain_slope_window_m: float = 10.0
+
+
+FIT_SEARCH = FitSearchRules()
+
+
+@dataclass(frozen=True)
+class RobustFitRules:
+    """Sample sizes of the robust line fits (``median_line_fit``: least median of squares,
+    Rousseeuw 1984; the shape test's Theil-Sen slope): all pairs up to these, else that many drawn
+    (seeded). Time, not tuning: more pairs give the same line on a wire."""
+
+    lms_max_pairs: int = 256
+    lms_max_points: int = 512
+    theil_sen_max_pairs: int = 4000
+
+
+ROBUST_FIT = RobustFitRules()
+
+
+@dataclass(frozen=True)
+class CircuitRules:
+    """Supports where circuits end unseen (the layers stage's ``circuit_ends`` and
+    ``circuit_reach``), docs/powerlines.md "Crossings"."""
+
+    # parallel conductors within 1 degree and 5 m across whose far ends lie within 1 m of one another
+    # along them, over 5 m inside the data: the circuit ends at a pole the scan saw too little of
+    max_angle_deg: float = 1.0
+    ends_across_m: float = 5.0
+    ends_along_m: float = 1.0
+    edge_m: float = 5.0
+    # a wire seen short of its sibling's end (within 3 m across) runs on to it, 1 to 5 m farther
+    # (mobile_dist seed 5: 2 m short of the other line's pole)
+    reach_across_m: float = 3.0
+    reach_min_m: float = 1.0
+    reach_max_m: float = 5.0
+
+
+CIRCUITS = CircuitRules()
+
+
+@dataclass(frozen=True)
 class WireRules:
     """The thresholds of ``conductors_3d`` (its docstring says what each does; the stage gives
     ``max_rms`` from its parameters)."""
@@ -278,7 +372,7 @@ class NextSpanRules:
     lateral_m: float = 0.3
     max_step_m: float = 0.5
     max_rise_m: float = 3.0
-    min_contrast: float = 4.0
+    min_contrast: float = WIRE_CONTRAST
     max_rounds: int = 4
 
 
@@ -376,7 +470,7 @@ class FoliageRules:
     """The thresholds of ``in_foliage`` (its docstring says what each does)."""
 
     window_m: float = 1.0
-    min_contrast: float = 4.0
+    min_contrast: float = WIRE_CONTRAST
     min_sides: int = 5
     margin_m: float = 0.5
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rules import FIT_SEARCH
 from .catenaries import SIDE_BY_SIDE_MIN_GAP_M, WIRE_LATERAL_RMS_M, line_fit
 
 
-def split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_BY_SIDE_MIN_GAP_M, depth: int = 3,
-                   window_m: float = 5.0, max_sd: float = WIRE_LATERAL_RMS_M) -> np.ndarray:
+def split_bundles(s, off, lab, min_points: int, z=None, min_gap: float = SIDE_BY_SIDE_MIN_GAP_M,
+                  depth: int = FIT_SEARCH.bundle_depth, window_m: float = FIT_SEARCH.bundle_window_m,
+                  max_sd: float = WIRE_LATERAL_RMS_M) -> np.ndarray:
     """Sub-conductors of a bundle hang side by side (2), in a triangle (3) or a square (4),
     closer than their scatter can keep apart in a neighbour graph: split a piece in two where
     its residual across the line (after a straight trend along it) or, given ``z``, in height
@@ -145,7 +147,7 @@ def windowed_groups(s, off, min_points: int, min_gap: float, max_sd: float, wind
     return out
 
 
-def _across_wires(s, off, grouping, max_drift_m: float, start=None, rounds: int = 4) -> np.ndarray:
+def _across_wires(s, off, grouping, max_drift_m: float, start=None, rounds: int = FIT_SEARCH.bundle_rounds) -> np.ndarray:
     """Offsets across a line less the trend of the wires in them: the wires of a piece run
     parallel, and a trend fitted to all its points together tilts towards whichever wire has more
     points at each end (a Hough line drawn across two phases holds a third one's points past the
@@ -183,7 +185,8 @@ def _across_wires(s, off, grouping, max_drift_m: float, start=None, rounds: int 
     return r
 
 
-def _clean_groups(r: np.ndarray, min_size: int, min_gap: float, max_sd: float, max_groups: int = 4):
+def _clean_groups(r: np.ndarray, min_size: int, min_gap: float, max_sd: float,
+                  max_groups: int = FIT_SEARCH.bundle_max_groups):
     """The fewest groups (3 to ``max_groups``) of values ``r`` (1D k-means from evenly spread
     quantiles) that are each ``min_size`` or more, neighbouring centres ``min_gap`` and 4 standard
     deviations of the widest group apart, that group no wider than ``max_sd``: (clarity, group of
@@ -261,7 +264,8 @@ def two_means_1d(r: np.ndarray, min_size: int):
     return upper, float(lo_s[best] / kb), float(hi_s[best] / (n - kb)), sd
 
 
-def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float, slope_window: float = 10.0) -> np.ndarray:
+def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float,
+                  slope_window: float = FIT_SEARCH.chain_slope_window_m) -> np.ndarray:
     """Wire number of each connected piece (-1: too small). Pieces follow each other along the
     line across gaps (pylons, occlusions) when one ends where the next begins, at about the same
     height; wires are numbered from the highest down.

@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from toolbox.neighbourhoods import neighbourhood_covariances, principal_axes, symmetric3_eigenvalues
 
-from ..rules import CANDIDATES
+from ..rules import CANDIDATES, ROBUST_FIT
 from .catenaries import line_fit
 
 MAX_DENSITY_NEIGHBOURS = 256  # bounds the neighbourhoods' memory on very dense (mobile) scans
@@ -262,7 +262,7 @@ def is_ribbon(xyz, bin_m, max_band_m, floor_share) -> bool:
     return _bands(r - np.median(r), bin_m, max_band_m, floor_share)
 
 
-def _theil_sen_slope(x, y, max_pairs: int = 4000) -> float:
+def _theil_sen_slope(x, y, max_pairs: int = ROBUST_FIT.theil_sen_max_pairs) -> float:
     """The median slope of pairs of points at least a quarter of their extent apart along ``x``
     (Theil 1950, Sen 1968): all pairs up to ``max_pairs``, else that many drawn (seeded)."""
     n = len(x)

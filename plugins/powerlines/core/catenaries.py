@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rules import SIDE_BY_SIDE_MIN_GAP_M, SPAN_CUTS, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
+from ..rules import ROBUST_FIT, SIDE_BY_SIDE_MIN_GAP_M, SPAN_CUTS, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
 
 # the least lateral tolerance of a wire's points about its trend, whatever their measured
 # scatter: a few centimetres of ranging noise on either side
@@ -81,7 +81,8 @@ def line_fit(x, y) -> tuple[float, float]:
     return slope, ym - slope * xm
 
 
-def median_line_fit(x, y, max_pairs: int = 256, max_points: int = 512) -> tuple[float, float]:
+def median_line_fit(x, y, max_pairs: int = ROBUST_FIT.lms_max_pairs,
+                    max_points: int = ROBUST_FIT.lms_max_points) -> tuple[float, float]:
     """(slope, intercept) of the line through two of the points that leaves the smallest median
     absolute residual (least median of squares, Rousseeuw 1984): a wire's plan trend where up to
     half of what was linked to it is a crown's scatter, which pulls a least-squares line (a clump

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..rules import AlongSurfaceRules, FoliageRules, SurfaceRules
+from ..rules import SPAN_POINTS, AlongSurfaceRules, FoliageRules, SurfaceRules
 from .catenaries import WIRE_ID_BASE, catenary, fit_tolerance_m, line_fit
 
 
@@ -44,7 +44,7 @@ def core_ring_contrast(core, ring):
 
 
 def off_their_spans(spans, lines, px, py, pz, line_of, wire_of, max_rms: float, clutter_xyz=None,
-                    clutter_m: float = 0.3, margin_m: float = 0.5) -> np.ndarray:
+                    clutter_m: float = SPAN_POINTS.clutter_m, margin_m: float = SPAN_POINTS.clutter_margin_m) -> np.ndarray:
     """Per wire point (``line_of``, ``wire_of`` its conductor and wire; -1: none): whether it lies
     farther across from the plan trend of its wire's span than that span's lateral tolerance (the
     span at its position, within ``margin_m`` of its extent, with the least height residual) and,

@@ -254,7 +254,7 @@ def _stacks(runs, stack_m: float, cos_max: float) -> list[list[int]]:
 class _Around:
     """The points off the ground around a run (see short_wires), and which of them are wire-like."""
 
-    def __init__(self, xyz, wire_like=None, plane_m: float = 0.16):
+    def __init__(self, xyz, wire_like, plane_m: float):
         self.tree, self.plane_m = cKDTree(xyz), plane_m
         self.wire_like = np.zeros(len(xyz), bool) if wire_like is None else np.asarray(wire_like, bool)
 

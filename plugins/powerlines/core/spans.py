@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..rules import SURFACE_ROWS, GrowRules, NextSpanRules
+from ..rules import SPAN_POINTS, SURFACE_ROWS, GrowRules, NextSpanRules
 from .catenaries import WIRE_HEIGHT_RMS_M, catenary, fit_catenary, fit_tolerance_m, line_fit, median_line_fit
 from .clutter import _contrast, _on_spans
 from .wires_3d import _longest_run, _refined_trend, peel_catenaries
@@ -103,7 +103,7 @@ def wire_point_spacing(spans, lines, px, py, line_of, wire_of, max_rms: float, m
     return float(np.median(gaps)) if len(gaps) >= 20 else None
 
 
-def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = 0.25):
+def points_on_spans(spans, lines, px, py, pz, max_rms: float, lateral_m: float = SPAN_POINTS.on_span_m):
     """For points outside the 3D step (the candidates the shape test left out: a wire's points
     next to a pole top, whose neighbourhood leans on the pole), the conductor and wire of the
     fitted span each lies on (within its extent, ``lateral_m`` of its plan position and its fit
@@ -204,7 +204,8 @@ def grow_span_ends(spans, lines, px, py, pz, free, max_rms, max_gap_m, reach_m, 
     return line_of, wire_of
 
 
-def _stacked_at(sp, end, sign, line_spans, own_m: float, stack_m: float, across_m: float = 0.5) -> bool:
+def _stacked_at(sp, end, sign, line_spans, own_m: float, stack_m: float,
+                across_m: float = SPAN_POINTS.stack_across_m) -> bool:
     """Whether another wire of the line hangs over or under span ``sp`` near its ``end`` (within
     ``stack_m`` in height and ``across_m`` in plan, along its last ``own_m``): a stack."""
     s = np.linspace(end - sign * own_m, end, 5)
@@ -339,7 +340,7 @@ def _span_grown(k, fit, band, reach, free, lateral_m: float, max_gap_m: float, t
     return k, fit
 
 
-def _clumped(s, window_m: float, share: float = 0.5) -> bool:
+def _clumped(s, window_m: float, share: float = SPAN_POINTS.clump_share) -> bool:
     """More than ``share`` of the positions ``s`` within one window of ``window_m``: a pole's or a
     crown's blob with a few points either side, not a wire's points spread along it."""
     ss = np.sort(s)
@@ -378,7 +379,7 @@ def _robust_trend(sp, s, off, z, own):
 
 
 def bridge_gaps(spans, lines, px, py, pz, free, max_rms: float, max_gap_m: float, min_gap_m: float = 1.0,
-                sample_m: float = 0.5, line_of=None, wire_of=None) -> list:
+                sample_m: float = SPAN_POINTS.gap_sample_m, line_of=None, wire_of=None) -> list:
     """The stretches of a wire between two of its fitted pieces along one line that one catenary
     explains: where the wire runs through a crown, the shape test and the Hough lose it, the 3D
     step fits the pieces either side, and ``grow_span_ends`` stops at the foliage. Two spans

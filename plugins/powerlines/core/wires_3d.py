@@ -11,7 +11,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..rules import (ALONE_AROUND_M, ALONE_MAX_AROUND, ALONE_MAX_NEAR, ALONE_NEAR_M, ALONE_REACH_M, ALONE_ROUNDS,
-                     SPAN_CUTS, STANDS_CLEAR_MAX, PeelRules, RibbonRules, WireRules)
+                     FIT_SEARCH, SPAN_CUTS, SPAN_POINTS, STANDS_CLEAR_MAX, PeelRules, RibbonRules, WireRules)
 from .bundles import _chain_pieces, split_bundles
 from .catenaries import (
     ISOLATION_M,
@@ -192,8 +192,8 @@ def _sparse_wires(li, band, good: list, next_wire: int, out, min_span: float, s_
             good.append(spans[-1])
 
 
-def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: float, max_slope: float = 0.5,
-                       share: float = 0.9):
+def _whole_sparse_wire(run, fit, xyz, wired, wire_of, max_rms: float, radius_m: float,
+                       max_slope: float = FIT_SEARCH.sparse_max_slope, share: float = FIT_SEARCH.sparse_wire_share):
     """A sparse wire found from its longest run (indices ``run`` into a line's band ``xyz``:
     along, across, height; ``fit`` its catenary) with the rest of its points past gaps wider
     still: the band's points on that catenary where it hangs gently (slope at most
@@ -480,7 +480,8 @@ def _runs(t, max_gap_m: float, min_length_m: float) -> list:
 
 
 def twin_lines(spans, lines, max_rms: float, min_span_m: float, band_m: float,
-               across_m: float = 0.5 * SIDE_BY_SIDE_MIN_GAP_M, max_angle_deg: float = 0.5) -> list[tuple[int, int]]:
+               across_m: float = 0.5 * SIDE_BY_SIDE_MIN_GAP_M,
+               max_angle_deg: float = FIT_SEARCH.twin_max_angle_deg) -> list[tuple[int, int]]:
     """Pairs of lines (i < j; ``lines``: [(anchor, direction, t_from, t_to)]) whose bands share a
     wire: the Hough can draw a ribbon's lines between its phases, a few tenths of a metre either
     side of the middle one, and each band then holds the points on its side of that wire (two
@@ -705,7 +706,8 @@ def _longest_run(s, idx, gap_m: float) -> np.ndarray:
     return max(np.split(order, np.flatnonzero(np.diff(s[order]) > gap_m) + 1), key=len)
 
 
-def _local_triples(s, z, n: int, min_span: float, max_slope: float, rng, draws: int = 8, chord_tol_m: float = 0.3):
+def _local_triples(s, z, n: int, min_span: float, max_slope: float, rng, draws: int = FIT_SEARCH.triple_draws,
+                   chord_tol_m: float = FIT_SEARCH.triple_chord_m):
     """Point triples (indices) for catenary hypotheses drawn along the line: a first point, a
     third min_span/2 to min_span further on that a wire could reach from it (slope ≤ max_slope),
     a second between them near their chord. Where a wire is a few percent of a band's points
@@ -738,7 +740,7 @@ def _local_triples(s, z, n: int, min_span: float, max_slope: float, rng, draws: 
     return out
 
 
-def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m: float = 0.5):
+def _pick_up(li, line_spans, cand, s, z, off, line_of, wire_of_point, lateral_m: float = SPAN_POINTS.pick_up_m):
     """Points of a line's band not yet on a wire that lie on one of its fitted spans (within the
     span's extent, ``lateral_m`` of its plan position and its fit tolerance): pieces of a wire
     too small to fit alone (sparse stretches, a sub-conductor seen a few times)."""

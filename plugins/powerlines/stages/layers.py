@@ -11,6 +11,7 @@ from shapely.geometry import LineString, Point
 import toolbox
 from toolbox.crossings import crossings
 
+from ..rules import CIRCUITS
 from ..core import catenary, ends_at_supports
 from ..plan_geometry import wire_reach_of
 from ..state import State
@@ -211,8 +212,9 @@ def far_ends(lines, checks) -> list:
     return out
 
 
-def circuit_ends(lines, checks, bounds, max_angle_deg: float = 1.0, across_m: float = 5.0, along_m: float = 1.0,
-                  edge_m: float = 5.0) -> list:
+def circuit_ends(lines, checks, bounds, max_angle_deg: float = CIRCUITS.max_angle_deg,
+                 across_m: float = CIRCUITS.ends_across_m, along_m: float = CIRCUITS.ends_along_m,
+                 edge_m: float = CIRCUITS.edge_m) -> list:
     """Supports seen or not: where two or more parallel conductors (within ``max_angle_deg``
     and ``across_m`` of one another) have the far ends of their checked extents (``checks``, per
     line a list of (a, b)) within ``along_m`` of one another along them, more than ``edge_m``
@@ -238,8 +240,9 @@ def circuit_ends(lines, checks, bounds, max_angle_deg: float = 1.0, across_m: fl
     return out
 
 
-def circuit_reach(lines, checks, max_angle_deg: float = 1.0, across_m: float = 3.0, min_m: float = 1.0,
-                   max_m: float = 5.0) -> list:
+def circuit_reach(lines, checks, max_angle_deg: float = CIRCUITS.max_angle_deg,
+                  across_m: float = CIRCUITS.reach_across_m, min_m: float = CIRCUITS.reach_min_m,
+                  max_m: float = CIRCUITS.reach_max_m) -> list:
     """``checks`` (per line a list of (a, b)) with each line's far ends carried on to where a
     parallel conductor of its circuit (within ``max_angle_deg``, its end within ``across_m``
     across) is seen to end, ``min_m`` to ``max_m`` farther: the phases of a circuit end at one

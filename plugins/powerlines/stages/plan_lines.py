@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core import band_owner, conductors_3d, ribbon_lines, stands_clear, thin_across, twin_lines, wire_point_spacing
 from ..plan_geometry import merge_twins, realign, redrawn_lines
+from ..rules import STANDS_CLEAR_RADIUS_M
 from ..settings import GAP_SPACINGS, STANDS_CLEAR_MAX, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import fold_stubs, keep_conductors
@@ -129,7 +130,7 @@ def lines_and_wires(pc, keep, hag, cell_used, params, ctx, timings, min_fit_shar
     return lines, geo, spans, line_of, wire_of_pt, len(th)
 
 
-def stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = 0.5) -> bool:
+def stands_clear_of(pc, hag, own, height_min_m: float, radius_m: float = STANDS_CLEAR_RADIUS_M) -> bool:
     """Whether the points ``own`` (indices into ``pc``) have on average at most STANDS_CLEAR_MAX
     other points above ``height_min_m`` within ``radius_m`` (core.stands_clear, on the points
     around them)."""

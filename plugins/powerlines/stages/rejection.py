@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from ..core import catenary, core_and_ring, core_ring_contrast, pieces_on_surfaces, span_on_surface
+from ..rules import WIRE_CONTRAST
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import drop_spans, keep_conductors
 
@@ -40,7 +41,8 @@ def stage(scene, st: State, settings, ctx) -> State:
     return st
 
 
-def lines_not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = 4.0, below=None, crowded=None) -> set:
+def lines_not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float = WIRE_CONTRAST, below=None,
+                    crowded=None) -> set:
     """Conductors that are not wires seen in the cross-section of their fitted spans, over the
     candidates ``p*``: most span points in a surface (``span_on_surface``: a roof's scan row,
     an eave), or no denser within 0.1 m than 0.2-0.5 m around (under ``min_contrast`` times:
