@@ -201,6 +201,9 @@ class SpanPointRules:
     # pole top) and within 0.5 m inside the 3D step's own band (a sub-conductor seen a few times)
     on_span_m: float = 0.25
     pick_up_m: float = 0.5
+    # a flat or rough candidate is a span's point right on it only: within 0.1 m (a ribbon's phases
+    # or a crown shared its neighbourhood)
+    on_span_flat_m: float = 0.1
     # a wire point off its trend is foliage where another point off the ground is within 0.3 m
     # (the span at its position taken within 0.5 m of the span's extent)
     clutter_m: float = 0.3

@@ -12,6 +12,7 @@ import numpy as np
 from shapely.geometry import LineString
 
 from ..core import fit_catenary, grow_span_ends, make_span, points_on_spans, short_wires, sibling_wires
+from ..rules import SPAN_POINTS, STRAIGHT_RUNS
 from ..settings import MIN_SECOND_PASS, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import add_pass, keep_conductors
@@ -76,9 +77,10 @@ def stage(scene, st: State, settings, ctx) -> State:
 
     # candidates the shape test left out that lie on a fitted span are its points too: steep ones
     # (next to a pole top a wire point's neighbourhood leans on the pole), and flat or rough ones
-    # right on it, within 0.1 m in plan (a ribbon's phases or a crown shared their neighbourhood)
+    # right on it (a ribbon's phases or a crown shared their neighbourhood)
     # (steep points a short wire took are on a wire already)
-    for more, lateral_m in ((np.setdiff1d(idx[steep], keep), 0.25), (idx[~linear & ~steep], 0.1)):
+    for more, lateral_m in ((np.setdiff1d(idx[steep], keep), SPAN_POINTS.on_span_m),
+                            (idx[~linear & ~steep], SPAN_POINTS.on_span_flat_m)):
         m_line, m_wire = points_on_spans(spans, geo, pc.x[more] * hu, pc.y[more] * hu, pc.z[more] * vu,
                                          params["max_rms_3d_m"], lateral_m=lateral_m)
         on = m_line >= 0
@@ -116,7 +118,7 @@ def short_wire_pass(pc, free, off_ground, steep, wired, params, hu, vu, n_search
     ``wire_like``: which of ``off_ground`` are; runs are drawn from the first ``n_searched`` of
     ``free``, the rest only join a stack beside one) as a further pass's result for
     ``add_pass`` (one conductor and one straight span per run), or None."""
-    if (len(free) if n_searched is None else n_searched) < 12 or len(wired) == 0:
+    if (len(free) if n_searched is None else n_searched) < STRAIGHT_RUNS.min_points or len(wired) == 0:
         return None
     xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
     origin = xyz.min(axis=0)
@@ -171,7 +173,7 @@ def add_sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, 
     conductors (pieces beside the spans of one line at one offset make one, a span each). A line
     whose points a sibling takes for the most part was a stretch of it: it is dropped and the
     sibling holds its points. Returns (lines, geo, spans, line_of, wire_of_pt, number added)."""
-    min_points = 12  # sibling_wires' default: a piece left with fewer is no wire of its own
+    min_points = (rules or Rules()).siblings.min_points  # a piece left with fewer is no wire of its own
     if len(keep) < min_points or not spans:
         return lines, geo, spans, line_of, wire_of_pt, 0
     xyz = np.column_stack([pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu])

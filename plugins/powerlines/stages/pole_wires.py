@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from ..core import points_on_spans, wires_from_poles
+from ..rules import SPAN_POINTS, STRAIGHT_RUNS
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import add_pass
 from .more_wires import straight_conductors
@@ -43,7 +44,7 @@ def stage(scene, st: State, settings, ctx) -> State:
             more = low[(conductor_of[low] < 0) & ~tower_pt[low]]
             m_line, m_wire = points_on_spans([sp for sp in spans if id(sp) not in old], geo, pc.x[more] * hu,
                                              pc.y[more] * hu, pc.z[more] * vu, params["max_rms_3d_m"],
-                                             lateral_m=0.25)
+                                             lateral_m=SPAN_POINTS.on_span_m)
             on = m_line >= 0
             keep = np.r_[keep, more[on]]
             line_of, wire_of_pt = np.r_[line_of, m_line[on]], np.r_[wire_of_pt, m_wire[on]]
@@ -60,7 +61,7 @@ def pole_wire_pass(pc, free, searched, off_ground, wire_like, poles, dtm, params
     the stand-alone test and the ``poles`` found, as a further pass's result for ``add_pass``
     (one conductor and one straight span per run), or None."""
     sub = np.flatnonzero(searched)
-    if len(sub) < 12:
+    if len(sub) < STRAIGHT_RUNS.min_points:
         return None
     xyz = np.column_stack([pc.x[free] * hu, pc.y[free] * hu, pc.z[free] * vu])
     origin = xyz.min(axis=0)
