@@ -52,6 +52,11 @@ GROW_FROM_M = 1.0  # spans grow into, and the cleaning looks at, points this far
 # the towers' share of the height where the spans ending at them are attached (the user's
 # pylon_top_share): a tower reaches its lowest attachment's height, its peak holds the earth wire
 PYLON_TOP_SHARE = 0.8
+# a wire in its cross-section: its core within 0.1 m, the ring around it 0.2-0.5 m out (its
+# sub-conductors and the next phase sit at a few places there; a crown or a wall fills it)
+CORE_M = 0.1
+RING_FROM_M = 0.2
+RING_TO_M = 0.5
 # a wire is a concentration of points: at least 4 times denser within 0.1 m than 0.2-0.5 m around
 # (a crown's points that happen to line up are not; a next span's points are)
 WIRE_CONTRAST = 4.0
@@ -139,6 +144,12 @@ class SurfaceRowRules:
     # each in a surface of its own (a short wire along the top edges of two roofs a street apart)
     piece_gap_m: float = 2.0
     piece_lateral_m: float = 0.15
+    # a wall seen from the side under the span (its top edge): 70-90 degrees down, dense down its
+    # scan lines, every 0.1 m filled for a metre (wires stacked 0.3 m apart leave gaps)
+    wall_min_tilt_deg: float = 70.0
+    wall_max_tilt_deg: float = 90.0
+    wall_bin_m: float = 0.1
+    wall_run_m: float = 1.0
 
 
 SURFACE_ROWS = SurfaceRowRules()
@@ -161,6 +172,8 @@ class StraightRunRules:
     pole_reach_m: float = 5.0
     pole_head_m: float = 1.8
     pole_max_around: float = 0.5
+    # the runs beside a found one (a stack's other wires) need 8 points, half its length
+    stack_min_points: int = 8
 
 
 STRAIGHT_RUNS = StraightRunRules()
@@ -183,6 +196,10 @@ class TowerShapeRules:
     base_along_deg: float = 30.0
     # a tower's points hang together from its top down: below a gap of 2 m stand fences and bushes
     max_gap_m: float = 2.0
+    # a pole's points: its column and its head, within its head reach of the axis from 1 m under its
+    # top (cross arms, insulators) to 0.3 m over it
+    head_depth_m: float = 1.0
+    head_over_m: float = 0.3
     # a short line crossing a longer one at a tower at 45 degrees or more is its arm
     arm_min_angle_deg: float = 45.0
 
@@ -241,8 +258,13 @@ class FitSearchRules:
     bundle_window_m: float = 5.0
     bundle_rounds: int = 4
     bundle_max_groups: int = 4
-    # pieces chained across a gap by their end slopes over 10 m (a wire rises to a pole, falls after)
+    # pieces chained across a gap by their end slopes over 10 m (a wire rises to a pole, falls after),
+    # their ends' heights apart by the link tolerance and 2 cm per metre of gap
     chain_slope_window_m: float = 10.0
+    chain_rise_per_m: float = 0.02
+    # the catenary fit's robust (soft L1) scale: residuals beyond 0.1 m weigh less (a wire's points
+    # fit within a few centimetres; a crown's point on its curve does not)
+    fit_robust_scale_m: float = 0.1
 
 
 FIT_SEARCH = FitSearchRules()
@@ -466,6 +488,16 @@ class PoleRules:
     voxel_m: float = 0.05
     head_m: float = 1.8
     max_ring_share: float = 0.6
+    # (named in passing in its docstring) a thin point's cylinder holds 6 voxels or more, and thin
+    # points count from 1 m over the ground (the ground filter's leftovers and a pole's foot aside);
+    # thin points within 0.3 m in plan are one column; the column's fill counted in 0.5 m layers;
+    # its top where the points above its thin part first break by 1.5 m; its footprint on 0.1 m cells
+    min_thin_voxels: int = 6
+    from_ground_m: float = 1.0
+    link_m: float = 0.3
+    layer_m: float = 0.5
+    top_break_m: float = 1.5
+    footprint_cell_m: float = 0.1
 
 
 @dataclass(frozen=True)

@@ -314,8 +314,8 @@ def _chain_pieces(s, z, lab, min_points: int, gap_max: float, z_tol: float,
                 continue
             half = max(gap, 0.0) / 2
             dz = abs((zhi_i + shi_i * half) - (zlo_j - slo_j * half))
-            if dz <= z_tol + 0.02 * max(gap, 0.0):
-                links.append((dz + 0.02 * max(gap, 0.0), ki, kj))
+            if dz <= z_tol + FIT_SEARCH.chain_rise_per_m * max(gap, 0.0):
+                links.append((dz + FIT_SEARCH.chain_rise_per_m * max(gap, 0.0), ki, kj))
     has_next, has_prev = set(), set()
     for _, ki, kj in sorted(links):
         if ki in has_next or kj in has_prev:

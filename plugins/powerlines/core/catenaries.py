@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rules import ROBUST_FIT, SIDE_BY_SIDE_MIN_GAP_M, SPAN_CUTS, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
+from ..rules import FIT_SEARCH, ROBUST_FIT, SIDE_BY_SIDE_MIN_GAP_M, SPAN_CUTS, SURFACE_CONTRAST, WIRE_LATERAL_RMS_M  # noqa: F401 (re-exported)
 
 # the least lateral tolerance of a wire's points about its trend, whatever their measured
 # scatter: a few centimetres of ranging noise on either side
@@ -163,7 +163,7 @@ def fit_catenary(s, z):
                 u = (s - p[1]) / c
                 ch = np.cosh(u)
                 r = p[0] + c * (ch - 1.0) - z  # = catenary(s, p0, p1, c) - z, operation for operation
-                q = r / 0.1
+                q = r / FIT_SEARCH.fit_robust_scale_m
                 np.hypot(q, 1.0, out=q)  # sqrt(1 + q²) without overflow: a far point must not weigh 0
                 w = np.sqrt(2.0 / (q + 1.0))
             last.clear()
@@ -215,7 +215,7 @@ def fit_catenary(s, z):
             x = leastsq(res_robust, x0, Dfun=jac_robust, col_deriv=True, full_output=True, ftol=1e-8, xtol=1e-8,
                         gtol=1e-8, maxfev=50, factor=100.0, diag=None)[0]
         else:
-            x = least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=0.1, max_nfev=50).x
+            x = least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=FIT_SEARCH.fit_robust_scale_m, max_nfev=50).x
     z0, s0, lc = x
     r = res(x)
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..rules import SPAN_POINTS, AlongSurfaceRules, FoliageRules, SurfaceRules
+from ..rules import CORE_M, RING_FROM_M, RING_TO_M, SPAN_POINTS, AlongSurfaceRules, FoliageRules, SurfaceRules
 from .catenaries import WIRE_ID_BASE, catenary, fit_tolerance_m, line_fit
 
 
@@ -27,7 +27,7 @@ def _contrast(tree, k, s, off, z, fit) -> float:
 def core_and_ring_masks(r) -> tuple[np.ndarray, np.ndarray]:
     """Of points at distances ``r`` from a wire in its cross-section: which lie within 0.1 m (its
     core) and which 0.2-0.5 m (the ring around it)."""
-    return r <= 0.1, (r > 0.2) & (r <= 0.5)
+    return r <= CORE_M, (r > RING_FROM_M) & (r <= RING_TO_M)
 
 
 def core_and_ring(r) -> tuple[int, int]:
@@ -39,7 +39,7 @@ def core_and_ring(r) -> tuple[int, int]:
 
 def core_ring_contrast(core, ring):
     """The core's density over the ring's, per unit of cross-section area (both x pi); counts or
-    arrays of counts."""
+    arrays of counts (the areas over pi written out: CORE_M², RING_TO_M² - RING_FROM_M²)."""
     return (core / 0.01) / np.maximum(ring / (0.25 - 0.04), 1e-9)
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from ..rules import STRAIGHT_RUNS, ShortWireRules, SiblingRules
+from ..rules import RING_FROM_M, RING_TO_M, STRAIGHT_RUNS, ShortWireRules, SiblingRules
 from .catenaries import MAX_NEIGHBOUR_PAIRS, N_BEST_LINES, catenary, fit_catenary, fit_tolerance_m, line_fit
 from .spans import _spans_by_line
 from .wires_3d import _longest_run
@@ -124,7 +124,8 @@ def short_wires(xyz, off_ground, steep, wired, min_length_m, max_gap_m, n_search
         near = np.asarray(tree.query_ball_point((q[0] + q[-1]) / 2, length / 2 + stack_m), np.int64)
         t, r = _along_axis(xyz[near], q[0], u)
         beside = near[~taken[near] & (t >= 0) & (t <= length) & (r <= stack_m)]
-        for sub in straight_wires(xyz[beside], length / 2, max_gap_m, tol_m=tol_m, min_points=8):
+        for sub in straight_wires(xyz[beside], length / 2, max_gap_m, tol_m=tol_m,
+                                  min_points=STRAIGHT_RUNS.stack_min_points):
             p = xyz[beside[sub]]
             d = p[-1] - p[0]
             if abs(d @ u) >= cos_max * np.linalg.norm(d) and _stands_alone(p, every, max_around):
@@ -267,7 +268,7 @@ def _stands_alone(q, around: _Around, max_around: float) -> bool:
     one over another, a ribbon's side by side; a roof's next scan rows rise away from its eave."""
     length = float(np.linalg.norm(q[-1] - q[0]))
     u = (q[-1] - q[0]) / max(length, 1e-9)
-    near = np.unique(np.concatenate(around.tree.query_ball_point(q, 0.5))).astype(np.int64)
+    near = np.unique(np.concatenate(around.tree.query_ball_point(q, RING_TO_M))).astype(np.int64)
     rel = around.tree.data[near] - q[0]
     t = rel @ u
     r = np.linalg.norm(rel - t[:, None] * u, axis=1)
@@ -276,7 +277,8 @@ def _stands_alone(q, around: _Around, max_around: float) -> bool:
     # run is near level)
     up = rel[:, 2] - t * u[2]
     stacked = around.wire_like[near] & ((np.abs(rel @ across) <= around.plane_m) | (np.abs(up) <= around.plane_m))
-    return int(((r > 0.2) & (r <= 0.5) & (t >= 0) & (t <= length) & ~stacked).sum()) < max_around * len(q)
+    ring = (r > RING_FROM_M) & (r <= RING_TO_M)
+    return int((ring & (t >= 0) & (t <= length) & ~stacked).sum()) < max_around * len(q)
 
 
 
@@ -378,7 +380,7 @@ def _alone_in_its_plane(k, s, off, z, fit, trend, max_around: float, plane_m: fl
     within = np.flatnonzero((s >= s[k].min()) & (s <= s[k].max()))
     across = off[within] - trend[0] * s[within] - trend[1]
     r = np.hypot(across, z[within] - catenary(s[within], *fit[:3]))
-    return int(((r > 0.2) & (r <= 0.5) & (np.abs(across) > plane_m)).sum()) < max_around * len(k)
+    return int(((r > RING_FROM_M) & (r <= RING_TO_M) & (np.abs(across) > plane_m)).sum()) < max_around * len(k)
 
 
 def _best_straight_run(p, min_length_m, max_gap_m, tol_m, n_samples, rng, neighbours=None):

@@ -566,7 +566,8 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     # a value given by name overrides the rule's
     r = dataclasses.replace(rules or PoleRules(), **overrides)
     (radius_m, ring_m, window_m, min_thin_m, min_fill, wire_reach_m, end_radius_m, column_m, voxel_m, head_m,
-     max_ring_share) = dataclasses.astuple(r)
+     max_ring_share, min_thin_voxels, from_ground_m, link_m, layer_m, top_break_m,
+     footprint_cell_m) = dataclasses.astuple(r)
     from scipy import ndimage
 
     if len(x) < 5 or len(wire_x) == 0:
@@ -593,18 +594,18 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
     outer = cKDTree(np.column_stack([p[:, :2], p[:, 2] * ring_m / half]))
     n_in = inner.query_ball_point(inner.data, radius_m, return_length=True)
     n_out = outer.query_ball_point(outer.data, ring_m, return_length=True)
-    thin = (n_in >= 6) & (n_out - n_in <= max_ring_share * n_in) & (p[:, 2] >= 1.0)
+    thin = (n_in >= min_thin_voxels) & (n_out - n_in <= max_ring_share * n_in) & (p[:, 2] >= from_ground_m)
     t = p[thin]
     if len(t) < 5:
         return []
-    pairs = cKDTree(t[:, :2]).query_pairs(0.3, output_type="ndarray")
+    pairs = cKDTree(t[:, :2]).query_pairs(link_m, output_type="ndarray")
     _, lab = connected_components(sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
                                                     shape=(len(t), len(t))), directed=False)
     plan, wires = cKDTree(p[:, :2]), cKDTree(np.column_stack([wire_x, wire_y]))
     wire_hag = np.asarray(wire_hag, float)
     ends = cKDTree(np.asarray(span_ends, float)) if span_ends is not None and len(span_ends) else None
     end_hag = None if span_end_hag is None else np.asarray(span_end_hag, float)
-    cell = 0.1
+    cell = footprint_cell_m
     k_cells = int(np.ceil(column_m / cell)) + 1
     found = []
     for k in np.unique(lab):
@@ -614,11 +615,11 @@ def find_poles(x, y, hag, wire_x, wire_y, wire_hag, line_headings, lines_xy, spa
         axis = np.median(g[:, :2], axis=0)
         h = np.sort(p[plan.query_ball_point(axis, column_m), 2])
         thin_top = float(g[:, 2].max())
-        layers = np.unique(np.floor(h[(h >= 1.0) & (h <= thin_top)] / 0.5))
-        if len(layers) < min_fill * max(np.ceil((thin_top - 1.0) / 0.5), 1):
+        layers = np.unique(np.floor(h[(h >= from_ground_m) & (h <= thin_top)] / layer_m))
+        if len(layers) < min_fill * max(np.ceil((thin_top - from_ground_m) / layer_m), 1):
             continue
         above = h[h >= thin_top]  # (none where the thin points spread wider than the column)
-        breaks = np.flatnonzero(np.diff(above) > 1.5)
+        breaks = np.flatnonzero(np.diff(above) > top_break_m)
         top = float(above[breaks[0]] if len(breaks) else above[-1]) if len(above) else thin_top
         nb = wires.query_ball_point(axis, wire_reach_m)
         mine = ends.query_ball_point(axis, wire_reach_m) if ends is not None and end_hag is not None else []
@@ -670,7 +671,8 @@ def pylon_points(p: Pylon, x, y, hag=None, max_gap_m: float = TOWER_SHAPE.max_ga
         if len(gaps):
             inside &= hag >= h[gaps[0]]
     if hag is not None and p.head_m > 0:
-        inside |= (np.hypot(x - p.x, y - p.y) <= p.head_m) & (hag >= p.height_m - 1.0) & (hag <= p.height_m + 0.3)
+        inside |= (np.hypot(x - p.x, y - p.y) <= p.head_m) & (hag >= p.height_m - TOWER_SHAPE.head_depth_m) & \
+            (hag <= p.height_m + TOWER_SHAPE.head_over_m)
     return inside
 
 

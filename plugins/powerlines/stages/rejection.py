@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..core import catenary, core_and_ring, core_ring_contrast, pieces_on_surfaces, span_on_surface
-from ..rules import WIRE_CONTRAST
+from ..rules import SURFACE_ROWS, WIRE_CONTRAST
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import drop_spans, keep_conductors
 
@@ -76,9 +76,9 @@ def lines_not_wires(spans, geo, px, py, pz, max_rms: float, min_contrast: float 
                 flat += sp.n_points
             elif below is not None and span_on_surface(
                     sb, offb - sp.offset - sp.offset_slope * sb, zb - catenary(sb, sp.z0, sp.s0, sp.c), sp.s_from,
-                    sp.s_to, bin_m=0.1, min_run_m=1.0, min_tilt_deg=70.0, max_tilt_deg=90.0):
-                # a wall seen from the side is dense down its scan lines: every 0.1 m filled
-                # for a metre (wires stacked 0.3 m apart leave gaps)
+                    sp.s_to, bin_m=SURFACE_ROWS.wall_bin_m, min_run_m=SURFACE_ROWS.wall_run_m,
+                    min_tilt_deg=SURFACE_ROWS.wall_min_tilt_deg, max_tilt_deg=SURFACE_ROWS.wall_max_tilt_deg):
+                # a wall seen from the side is dense down its scan lines
                 flat += sp.n_points
             inside = (s >= sp.s_from) & (s <= sp.s_to)
             core, ring = core_and_ring(np.hypot(o[inside], dz[inside]))
