@@ -676,7 +676,8 @@ def peel_catenaries(s, z, off, min_points, min_span, max_rms, gap_m, rules: Peel
             for _ in range(2):
                 o1, o0 = line_fit(ls[run][thin], lo_[run][thin])
                 r = lo_[run] - o1 * ls[run] - o0
-                thin = np.abs(r - np.median(r[thin])) <= max(3 * 1.4826 * np.median(np.abs(r[thin] - np.median(r[thin]))), 0.05)
+                mad = np.median(np.abs(r[thin] - np.median(r[thin])))
+                thin = np.abs(r - np.median(r[thin])) <= max(3 * 1.4826 * mad, WIRE_LATERAL_FLOOR_M)
             if thin.sum() < max(min_points, len(run) // 2) or np.sqrt(np.mean(r[thin] ** 2)) > lateral_tol_m:
                 continue
             run = run[thin]
