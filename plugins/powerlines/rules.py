@@ -49,6 +49,10 @@ ALONG_SLOPE_MAX = 0.01746
 MIN_CANDIDATES = 10  # fewer candidates than this: no wire can be there (a field, a road)
 MIN_SECOND_PASS = 100  # wire-like points left on no wire that make a second pass worth its time
 GROW_FROM_M = 1.0  # spans grow into, and the cleaning looks at, points this far off the ground
+# the layers stage warns that the top-hat threw the wires away (the AHN4 case: conductors side by
+# side closer than the mask cell) when it kept under 15 % of 200 or more linear candidates
+TOPHAT_WARN_MIN_LINEAR = 200
+TOPHAT_WARN_SHARE = 0.15
 # the towers' share of the height where the spans ending at them are attached (the user's
 # pylon_top_share): a tower reaches its lowest attachment's height, its peak holds the earth wire
 PYLON_TOP_SHARE = 0.8
@@ -200,6 +204,16 @@ class TowerShapeRules:
     # top (cross arms, insulators) to 0.3 m over it
     head_depth_m: float = 1.0
     head_over_m: float = 0.3
+    # a tower's points and its search: from 1 m over the ground (foundations and what the ground
+    # filter leaves under a tower are not the tower)
+    from_ground_m: float = 1.0
+    # a cell's top is its highest point with another within 5 m under it (a far pole's few points lie
+    # 2-3 m apart), not a stray point over it (a bird, noise the ground filter left)
+    top_held_m: float = 5.0
+    # a pole's arm is a cross arm of a metre or two (the wires leaving it across the street are
+    # wires); an arm's both ends lie within the support's reach and a metre
+    pole_arm_m: float = 1.5
+    arm_margin_m: float = 1.0
     # a short line crossing a longer one at a tower at 45 degrees or more is its arm
     arm_min_angle_deg: float = 45.0
 

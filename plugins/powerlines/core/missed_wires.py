@@ -177,12 +177,12 @@ def wires_from_poles(xyz: np.ndarray, poles: np.ndarray, off_ground: np.ndarray,
     * continued toward that pole, it passes within ``head_m`` of the axis (a cross arm's reach)
       between 1 m over its base and its top: where a wire is held.
     Returns the runs, indices into ``xyz`` sorted along each."""
-    if not len(poles) or len(xyz) < 12:
+    if not len(poles) or len(xyz) < STRAIGHT_RUNS.min_points:
         return []
     axes = cKDTree(poles[:, :2])
     # only points a run reaching a pole may hold
     near = np.flatnonzero(axes.query(xyz[:, :2], distance_upper_bound=reach_m + 2 * min_length_m)[0] < np.inf)
-    if len(near) < 12:
+    if len(near) < STRAIGHT_RUNS.min_points:
         return []
     runs = [near[r] for r in straight_wires(xyz[near], min_length_m, max_gap_m, tol_m=tol_m)]
     every = _Around(off_ground, wire_like, 2 * tol_m)

@@ -368,7 +368,7 @@ def _tower_grid(x, y, hag, lines_xy, reach_m: float, cell_m: float):
     # filter left)
     order = np.lexsort((hag, flat))
     f, h = flat[order], hag[order]
-    held = np.r_[False, (f[1:] == f[:-1]) & (np.diff(h) <= 5.0)]
+    held = np.r_[False, (f[1:] == f[:-1]) & (np.diff(h) <= TOWER_SHAPE.top_held_m)]
     top_held = np.full(rows * cols, -np.inf)
     np.maximum.at(top_held, f[held], h[held])
     return x, y, hag, flat, top, n_layers, centres, (x0, y0, cell_m, rows, cols), top_held

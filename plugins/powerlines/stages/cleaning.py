@@ -82,7 +82,7 @@ def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, v
     ``pc``, on no wire), each added as a further wire of the span's conductor (one over another,
     they are one line in plan): ``conductor_of`` and ``wire_of`` (per point of ``pc``) are
     updated in place. Returns (spans, number added)."""
-    if len(pool) < 12 or not spans:
+    if len(pool) < (rules or Rules()).siblings.min_points or not spans:
         return spans, 0
     xyz = np.column_stack([pc.x[pool] * hu, pc.y[pool] * hu, pc.z[pool] * vu])
     # (S_min long, but covering no share of the span: the cables of a stack hide one another

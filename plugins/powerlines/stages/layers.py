@@ -11,7 +11,7 @@ from shapely.geometry import LineString, Point
 import toolbox
 from toolbox.crossings import crossings
 
-from ..rules import CIRCUITS
+from ..rules import CIRCUITS, TOPHAT_WARN_MIN_LINEAR, TOPHAT_WARN_SHARE
 from ..core import catenary, ends_at_supports
 from ..plan_geometry import wire_reach_of
 from ..state import State
@@ -60,7 +60,8 @@ def stage(scene, st: State, settings, ctx):
         out["classified"] = pc.with_fields(classification=classes_decided(pc, scene.ground_cls, supports.tower_pt,
                                                                           conductor_of >= 0))
     n_linear = int(scene.linear.sum())
-    if (len(cond) == 0 or params["cell_size_m"] is not None) and n_linear >= 200 and st.n_tophat < 0.15 * n_linear:
+    if (len(cond) == 0 or params["cell_size_m"] is not None) and n_linear >= TOPHAT_WARN_MIN_LINEAR and \
+            st.n_tophat < TOPHAT_WARN_SHARE * n_linear:
         # the AHN4 case: conductors side by side closer than the mask cell make a strip that the
         # opening keeps, and the top-hat throws the wires away
         ctx.log.warning(

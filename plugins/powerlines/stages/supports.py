@@ -92,7 +92,8 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
     pc, hag, ground_cls, hu, vu, dtm = scene.pc, scene.hag, scene.ground_cls, scene.hu, scene.vu, scene.dtm
     _, geo, spans = wires.as_tuple()
     cond = wires.lines["conductors"]
-    off = np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2) & (ground_cls != 7)
+    off = np.isfinite(hag) & (hag >= TOWER_SHAPE.from_ground_m) & (conductor_of < 0) & (ground_cls != 2) & \
+        (ground_cls != 7)
     ends, end_z, span_lines = [], [], []
     for sp in spans:
         if not sp.rms <= params["max_rms_3d_m"]:  # no catenary fits it: no evidence of a span ending here
@@ -129,7 +130,7 @@ def pylons_layer(scene, conductor_of, wires: Wires, params, also=(), passed_by=N
                                         top_share=params["pylon_top_share"], rules=rules.passed_through)
     tower = np.zeros(len(pc), bool)
     # foundations and what the ground filter leaves under a tower (< 1 m) are not the tower
-    cand = np.flatnonzero(np.isfinite(hag) & (hag >= 1.0) & (conductor_of < 0) & (ground_cls != 2))
+    cand = np.flatnonzero(np.isfinite(hag) & (hag >= TOWER_SHAPE.from_ground_m) & (conductor_of < 0) & (ground_cls != 2))
     rows, geoms = [], []
     for i, p in enumerate(found):
         inside = pylon_points(p, pc.x[cand] * hu, pc.y[cand] * hu, hag[cand])
@@ -167,8 +168,9 @@ def arm_lines(cond, found, hu, end_radius_m: float = TOWERS.end_radius_m,
     for p in found:
         far = p.extent_m()
         # a pole's arm is a cross arm of a metre or two: the wires leaving it across the street are wires
-        towers.append((p.x, p.y, far + 1.5, far + 1.0) if p.kind == "pole" else
-                      (p.x, p.y, max(end_radius_m, far), far + 1.0))
+        margin = TOWER_SHAPE.arm_margin_m
+        towers.append((p.x, p.y, far + TOWER_SHAPE.pole_arm_m, far + margin) if p.kind == "pole" else
+                      (p.x, p.y, max(end_radius_m, far), far + margin))
     lines = [LineString(np.asarray(g.coords)[:, :2] * hu) for g in cond.geometry]
     ends = [np.asarray(g.coords)[[0, -1]] for g in lines]
     unit = [(e[1] - e[0]) / max(np.hypot(*(e[1] - e[0])), 1e-9) for e in ends]
