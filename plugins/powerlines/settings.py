@@ -1,8 +1,7 @@
 """The power-line chain's settings: the run's parameters with the values derived from them, the
 plugin's fixed values (kept in ``rules``, each with where it came from) and the run's ``rules``
 (``rules.Rules``: the thresholds of every core decision the stages take, one record per
-decision; every default of a core signature reads one of its names). (Not there yet, #76: the
-literals inside function bodies.)"""
+decision; every default of a core signature reads one of its names)."""
 
 from __future__ import annotations
 
