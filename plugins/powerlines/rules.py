@@ -78,7 +78,8 @@ class CandidateRules:
     four the user may set are the plugin's parameters' defaults (neighbours, rugged_share,
     planar_share, density_radius_m)."""
 
-    # the method's pre-classification (METHODS.md §1), its shares as LAStools' planar/rugged tests
+    # the eigenvalue shares that stand in for the method's planar/rugged pre-classification
+    # (METHODS.md §1; the user's neighbours, rugged_share and planar_share)
     neighbours: int = 12
     rugged_share: float = 0.04
     planar_share: float = 0.2
@@ -94,7 +95,7 @@ class CandidateRules:
     density_cell_m: float = 1.0
     # a ribbon (phases side by side): bands of 0.05 m bins, each at most 0.4 m wide, bins under 5 %
     # of the fullest empty (a cross arm joins them at a pole); sets of 20 points or more, judged in
-    # 10 m pieces where linked to a crown (AHN4's and the family's ribbons and bundles)
+    # 10 m pieces where linked to a crown
     ribbon_bin_m: float = 0.05
     ribbon_max_band_m: float = 0.4
     ribbon_floor_share: float = 0.05
@@ -165,8 +166,8 @@ class StraightRunRules:
     millimetres; and those leading from a found pole (``wires_from_poles``), docs/powerlines.md
     "Wires too short for the Hough: short wires, pole wires"."""
 
-    # points within 8 cm of the line (a wire's scatter in a mobile scan), 12 or more, rising at
-    # most 0.5 (steeper is a pole); 300 RANSAC draws per set
+    # points within 8 cm of the line, 12 or more, rising at most 0.5 (steeper is a pole); 300
+    # RANSAC draws per set
     tol_m: float = 0.08
     min_points: int = 12
     max_slope: float = 0.5
@@ -266,7 +267,7 @@ class FitSearchRules:
     # lines within 0.5 degrees of each other whose bands share a wire are twins (a ribbon's lines
     # drawn between its phases)
     twin_max_angle_deg: float = 0.5
-    # a bundle split 3 times at most (a square: 4 sub-conductors), heights about a running mean over
+    # a bundle's split repeated 3 times at most, heights about a running mean over
     # 5 m (a span's sag is smooth at that scale); wire trends refitted over 4 rounds, up to 4 groups
     bundle_depth: int = 3
     bundle_window_m: float = 5.0
@@ -288,7 +289,7 @@ FIT_SEARCH = FitSearchRules()
 class RobustFitRules:
     """Sample sizes of the robust line fits (``median_line_fit``: least median of squares,
     Rousseeuw 1984; the shape test's Theil-Sen slope): all pairs up to these, else that many drawn
-    (seeded). Time, not tuning: more pairs give the same line on a wire."""
+    (seeded): sample sizes, trading time against the chance of drawing a good pair."""
 
     lms_max_pairs: int = 256
     lms_max_points: int = 512
