@@ -27,7 +27,6 @@ from .rules import (  # noqa: F401 (the stages read the plugin's fixed values he
 )
 
 
-
 @dataclass
 class Settings:
     """The run's parameters (``params``: the user's, validated) with the derived values and the
