@@ -11,7 +11,7 @@ from scipy.sparse.csgraph import connected_components
 from shapely.geometry import LineString
 
 from .core import SIDE_BY_SIDE_MIN_GAP_M, WIRE_LATERAL_RMS_M, line_fit, span_in_frame
-from .settings import ALONG_SLOPE_MAX
+from .rules import ALONG_SLOPE_MAX
 from .wire_sets import runs_along, select_conductors
 
 

@@ -1,30 +1,13 @@
 """The power-line chain's settings: the run's parameters with the values derived from them, the
-plugin's fixed values (kept in ``rules``, each with where it came from) and the run's ``rules``
-(``rules.Rules``: the thresholds of every core decision the stages take, one record per
-decision; every default of a core signature reads one of its names)."""
+run's ``rules`` (``rules.Rules``: the thresholds of every core decision the stages take, one
+record per decision). The plugin's fixed values, each with where it came from, are in
+``rules.py``; every default of a core signature reads one of its names."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .rules import (  # noqa: F401 (the stages read the plugin's fixed values here)
-    Rules,
-    V_MAX_METHOD_M,
-    GAP_SPACINGS,
-    STANDS_CLEAR_MAX,
-    SETTLE_DRIFT_M,
-    POLE_TAKES_M,
-    POLE_FOOTPRINT_M,
-    POLE_CORE_M,
-    POLE_HEAD_M,
-    ALONE_REACH_M,
-    ALONE_AROUND_M,
-    ALONE_MAX_AROUND,
-    ALONG_SLOPE_MAX,
-    MIN_CANDIDATES,
-    MIN_SECOND_PASS,
-    GROW_FROM_M,
-)
+from .rules import GAP_SPACINGS, V_MAX_METHOD_M, Rules
 
 
 @dataclass

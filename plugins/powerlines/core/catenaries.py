@@ -149,8 +149,9 @@ def fit_catenary(s, z):
     # overhead is most of the cost (36 AHN4 spans 51 -> 39 ms, the same curves to 1e-5 m)
     last = {}
     jac_out = np.empty((3, len(s)))
+    f_m = FIT_SEARCH.fit_robust_scale_m
 
-    # The robust soft-L1 cost sum(f² ρ((r/f)²)), ρ(t) = 2(√(1+t) − 1), f = 0.1 m, written as plain
+    # The robust soft-L1 cost sum(f² ρ((r/f)²)), ρ(t) = 2(√(1+t) − 1), f = f_m, written as plain
     # least squares of r̃ = r·w, w = √(2/(q+1)), q = √(1+(r/f)²) (Σ r̃² is exactly that cost), so that
     # MINPACK's Levenberg-Marquardt minimises it: the same curves as scipy's trust-region solver
     # with loss="soft_l1" at 60 % of its time (to 0.1 mm on 95 of 99 AHN4 and corridor spans; the
@@ -163,7 +164,7 @@ def fit_catenary(s, z):
                 u = (s - p[1]) / c
                 ch = np.cosh(u)
                 r = p[0] + c * (ch - 1.0) - z  # = catenary(s, p0, p1, c) - z, operation for operation
-                q = r / FIT_SEARCH.fit_robust_scale_m
+                q = r / f_m
                 np.hypot(q, 1.0, out=q)  # sqrt(1 + q²) without overflow: a far point must not weigh 0
                 w = np.sqrt(2.0 / (q + 1.0))
             last.clear()
@@ -215,7 +216,7 @@ def fit_catenary(s, z):
             x = leastsq(res_robust, x0, Dfun=jac_robust, col_deriv=True, full_output=True, ftol=1e-8, xtol=1e-8,
                         gtol=1e-8, maxfev=50, factor=100.0, diag=None)[0]
         else:
-            x = least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=FIT_SEARCH.fit_robust_scale_m, max_nfev=50).x
+            x = least_squares(res, x0, jac=jac, loss="soft_l1", f_scale=f_m, max_nfev=50).x
     z0, s0, lc = x
     r = res(x)
     # RMS over the inliers: poles and insulators joined to a wire must not condemn its fit

@@ -69,6 +69,6 @@ def run_stages(scene, st, settings, ctx, first: str | None = None, last: str | N
 
 def no_wire_possible(scene) -> bool:
     """Fewer candidates than a wire needs stand in the height window (a field, a road)."""
-    from ..settings import MIN_CANDIDATES
+    from ..rules import MIN_CANDIDATES
 
     return len(scene.candidates) < MIN_CANDIDATES

@@ -21,7 +21,7 @@ from ..core import (
     off_their_spans,
     sibling_wires,
 )
-from ..settings import GROW_FROM_M, Rules
+from ..rules import GROW_FROM_M, Rules
 from ..state import State, Wires
 from ..wire_sets import keep_conductors
 

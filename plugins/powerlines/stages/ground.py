@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..core import height_window_top, local_surface_density, shape_classes
-from ..settings import GROW_FROM_M, MIN_CANDIDATES, V_MAX_METHOD_M
+from ..rules import GROW_FROM_M, MIN_CANDIDATES, V_MAX_METHOD_M
 from ..state import Scene
 
 

@@ -12,8 +12,7 @@ import numpy as np
 from shapely.geometry import LineString
 
 from ..core import fit_catenary, grow_span_ends, make_span, points_on_spans, short_wires, sibling_wires
-from ..rules import SPAN_POINTS, STRAIGHT_RUNS
-from ..settings import MIN_SECOND_PASS, Rules
+from ..rules import MIN_SECOND_PASS, SPAN_POINTS, STRAIGHT_RUNS, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import add_pass, keep_conductors
 from .plan_lines import lines_and_wires

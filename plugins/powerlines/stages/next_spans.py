@@ -11,7 +11,7 @@ import numpy as np
 from shapely.geometry import LineString
 
 from ..core import bridge_gaps, make_span, next_spans
-from ..settings import Rules
+from ..rules import Rules
 from ..state import CandidateLabels, State, Wires
 
 

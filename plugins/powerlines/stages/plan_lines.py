@@ -11,8 +11,7 @@ import numpy as np
 
 from ..core import band_owner, conductors_3d, ribbon_lines, stands_clear, thin_across, twin_lines, wire_point_spacing
 from ..plan_geometry import merge_twins, realign, redrawn_lines
-from ..rules import STANDS_CLEAR_RADIUS_M
-from ..settings import GAP_SPACINGS, STANDS_CLEAR_MAX, Rules
+from ..rules import GAP_SPACINGS, STANDS_CLEAR_MAX, STANDS_CLEAR_RADIUS_M, Rules
 from ..state import CandidateLabels, State, Wires
 from ..wire_sets import fold_stubs, keep_conductors
 

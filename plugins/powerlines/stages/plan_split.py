@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core import alone_beside_wires, in_pole_columns
 from ..plan_geometry import main_wire_spans, realign, side_by_side
-from ..settings import (
+from ..rules import (
     ALONE_AROUND_M,
     ALONE_MAX_AROUND,
     ALONE_REACH_M,

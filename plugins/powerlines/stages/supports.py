@@ -14,8 +14,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from ..core import catenary, find_poles, find_pylons, find_towers_passed_through, grow_span_ends, pylon_points
-from ..rules import TOWER_SHAPE, TOWERS
-from ..settings import POLE_FOOTPRINT_M, POLE_TAKES_M, Rules
+from ..rules import POLE_FOOTPRINT_M, POLE_TAKES_M, TOWERS, TOWER_SHAPE, Rules
 from ..state import CandidateLabels, State, Supports, Wires
 from ..wire_sets import keep_conductors
 
