@@ -82,14 +82,15 @@ def add_stacked_wires(pc, pool, geo, spans, conductor_of, wire_of, params, hu, v
     ``pc``, on no wire), each added as a further wire of the span's conductor (one over another,
     they are one line in plan): ``conductor_of`` and ``wire_of`` (per point of ``pc``) are
     updated in place. Returns (spans, number added)."""
-    if len(pool) < (rules or Rules()).siblings.min_points or not spans:
+    siblings = (rules or Rules()).siblings
+    if len(pool) < siblings.min_points or not spans:
         return spans, 0
     xyz = np.column_stack([pc.x[pool] * hu, pc.y[pool] * hu, pc.z[pool] * vu])
     # (S_min long, but covering no share of the span: the cables of a stack hide one another
     # over stretches, and a leftover stub of the span's own wire is inside its fit tolerance)
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
                           params["s_min_m"], stacked=True, min_cover=0.0,
-                          rules=(rules or Rules()).siblings)
+                          rules=siblings)
     # each conductor's highest wire number so far (its spans' and its points'), found once
     top = np.full(len(geo), -1, np.int64)
     on = conductor_of >= 0

@@ -172,14 +172,15 @@ def add_sibling_wires(pc, keep, lines, geo, spans, line_of, wire_of_pt, params, 
     conductors (pieces beside the spans of one line at one offset make one, a span each). A line
     whose points a sibling takes for the most part was a stretch of it: it is dropped and the
     sibling holds its points. Returns (lines, geo, spans, line_of, wire_of_pt, number added)."""
-    min_points = (rules or Rules()).siblings.min_points  # a piece left with fewer is no wire of its own
+    siblings = (rules or Rules()).siblings
+    min_points = siblings.min_points  # a piece left with fewer is no wire of its own
     if len(keep) < min_points or not spans:
         return lines, geo, spans, line_of, wire_of_pt, 0
     xyz = np.column_stack([pc.x[keep] * hu, pc.y[keep] * hu, pc.z[keep] * vu])
     length = np.array([t1 - t0 for (_, _, t0, t1) in geo] + [0.0])
     found = sibling_wires(spans, geo, xyz[:, 0], xyz[:, 1], xyz[:, 2], params["max_rms_3d_m"], params["band_m"],
                           params["s_min_m"], owner=line_of, owner_length=length[line_of], min_points=min_points,
-                          rules=(rules or Rules()).siblings)
+                          rules=siblings)
     if not found:
         return lines, geo, spans, line_of, wire_of_pt, 0
     taken = np.zeros(len(keep), bool)
