@@ -566,3 +566,22 @@ def test_low_outliers_and_the_minimum_without_them_match_full_recomputation():
     got = core.minimum_surface_without(grid, zmin, flat, z, noise)
     want, _ = core.minimum_surface(grid, None, None, z[~noise], flat[~noise])
     np.testing.assert_array_equal(got, want)  # NaN where a cell held only removed points
+
+
+def test_a_cell_holding_only_low_outliers_is_outside_the_footprint_in_the_split_pass_counts_too():
+    """The survey's point spacing from per-cell statistics (``spacing_counts_from_cells``) is the
+    run's: a cell beside the data whose only point is a low outlier holds no point for the
+    footprint in ``lowest_points``, and must not in the cell statistics either."""
+    from toolbox.survey_read import CellStats
+    from toolbox_plugins.morph_dtm.plugin import _settings_in_units, survey_cell_summary
+
+    gx, gy = np.meshgrid(np.arange(0.5, 40, 1.0), np.arange(0.5, 40, 1.0))
+    x, y = np.r_[gx.ravel(), 41.0], np.r_[gy.ravel(), 20.5]  # the last: in the cell east of the data
+    z = np.r_[np.zeros(gx.size), -10.0]
+    p = toolbox.algorithms()["dtm"].validate_params({})
+    whole = core.spacing_counts(x, y, z, _settings_in_units(p, 1.0, 1.0), (-np.inf, -np.inf, np.inf, np.inf))
+    stats = CellStats.empty(0.0, 40.0, 2.0, 20, 20)
+    stats.add(x, y, z)
+    got = survey_cell_summary(stats.finished(), p)
+    assert (got["n_points"], got["n_footprint_cells"]) == whole
+    assert whole[1] == 400  # the 20 x 20 cells of the data; not the outlier's

@@ -289,7 +289,7 @@ def test_copc_survey_reads_each_tile_by_bounds_and_equals_the_whole(survey, tmp_
         n = len(r.query())  # what the octree holds (copclib drops a point lying on a node's face now and then)
     assert n >= len(laspy.read(survey["whole"]).points) - 2
     rep = run_survey("dtm", [copc], tmp_path / "out", tile_size_m=100, workers=2)
-    assert rep["n_failed"] == 0
+    assert rep["n_failed"] == 0 and rep["survey_values_from"] == "the tiles' summaries"  # no split pass to take them from
     tiles = json.loads((tmp_path / "out" / "survey.json").read_text())["tiles"].values()
     decoded = [t["stats"]["n_decoded_points"] for t in tiles if t["status"] == "done"]
     assert max(decoded) < 0.8 * n  # no tile decodes the whole file

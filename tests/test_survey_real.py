@@ -195,7 +195,7 @@ def test_dtm_in_tiles_equals_the_whole_run_on_a_sparse_real_survey(topography):
     over, worst, only = _dtm_diff(topography["dtm"], topography["survey"] / "dtm.tif")
     assert over == 0 and only == 0, (over, worst, only)
     values = topography["report"]["survey_values"]
-    assert set(values) == {"refine_cell_m"}
+    assert set(values) == {"refine_cell_m"} and topography["report"]["survey_values_from"] == "the split pass"
     assert round(values["refine_cell_m"], 3) == topography["whole"]["stats"]["refine_cell_m_used"]
     a = laspy.read(topography["dir"] / "ref" / "dtm_classified.laz")
     parts = [laspy.read(p) for p in sorted((topography["survey"] / "classified").glob("*.laz"))]
@@ -208,6 +208,29 @@ def test_dtm_in_tiles_equals_the_whole_run_on_a_sparse_real_survey(topography):
     ia, ib = key(a), np.lexsort((b_z, b_y, b_x))
     assert np.array_equal(np.asarray(a.X)[ia], b_x[ib])
     assert np.array_equal(np.asarray(a.classification)[ia], b_c[ib])  # every point's class, as the whole run's
+
+
+@pytest.mark.parametrize("rel", ["lidR/Topography.laz", "pdal_autzen/autzen_trim.las", "ahn4_corridor/07CZ2_14.laz",
+                                 "isprs_filtertest/samp53_f32.txt", "isprs_filtertest/samp11.txt"])
+def test_the_split_pass_cell_statistics_give_the_whole_runs_spacing_counts(rel):
+    """``survey_cell_summary`` on CellStats gathered in chunks, in another order and on a raster of
+    another origin than the run's own grid, gives the counts one run over the file takes its
+    point spacing from (feet on Autzen; ISPRS's steep samples with low outliers)."""
+    from toolbox.io.points import read_points
+    from toolbox.survey_read import CellStats
+    from toolbox_plugins.morph_dtm.core import spacing_counts
+    from toolbox_plugins.morph_dtm.plugin import _ground_settings, survey_cell_summary, survey_cells
+
+    pc = read_points(shared_file(rel))
+    p = toolbox.algorithms()["dtm"].validate_params({})
+    whole = spacing_counts(pc.x, pc.y, pc.z, _ground_settings(pc, p), (-np.inf, -np.inf, np.inf, np.inf))
+    cell = survey_cells(p, pc.horizontal_unit_m)
+    stats = CellStats.empty(np.floor(pc.x.min() / cell) * cell + 5 * cell, np.floor(pc.y.max() / cell) * cell - 7 * cell,
+                            cell, 2, 2, horizontal_unit_m=pc.horizontal_unit_m, vertical_unit_m=pc.vertical_unit_m)
+    for part in np.array_split(np.random.default_rng(0).permutation(len(pc.x)), 5):
+        stats.add(pc.x[part], pc.y[part], pc.z[part])
+    got = survey_cell_summary(stats.finished(), p)
+    assert (got["n_points"], got["n_footprint_cells"]) == whole
 
 
 @pytest.mark.parametrize("rel,tile", REAL_SURVEYS, ids=[f"{Path(r).stem}-{t}" for r, t in REAL_SURVEYS])

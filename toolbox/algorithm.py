@@ -272,6 +272,14 @@ class Algorithm:
     #: values that every tile gets (the report's ``survey_values``).
     survey_summary: Callable[..., Mapping[str, Any]] | None = None
     survey_values: Callable[..., Mapping[str, Any]] | None = None
+    #: The same sums without reading the tiles again, where per-cell statistics of the points
+    #: suffice: ``survey_cells(values, horizontal_unit_m) -> cell`` (CRS units; None: no values
+    #: to find) asks the host for a ``CellStats`` (count, lowest and highest z per cell) gathered
+    #: while it splits the files, and ``survey_cell_summary(cell_stats, values) -> dict`` gives
+    #: the sums that ``survey_summary`` summed over all tiles gives. Used when every input is a
+    #: plain LAS/LAZ file; otherwise the tiles' ``survey_summary`` runs.
+    survey_cells: Callable[..., float | None] | None = None
+    survey_cell_summary: Callable[..., Mapping[str, Any]] | None = None
     #: Peak memory of a run per input point (bytes), to refuse before reading a file this machine
     #: cannot hold (``toolbox.memory.check_fits``). None: the host's default.
     bytes_per_point: int | None = None

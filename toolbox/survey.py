@@ -50,7 +50,7 @@ from .algorithm import Algorithm, LayerMerge
 from .errors import DataError, NothingFound, ToolboxError, UsageError
 from .io.vpc import is_vpc, read_vpc, write_vpc
 from .survey_exec import LocalPool, _run_dask, _run_local
-from .survey_read import chunk_cell_size, read_tile, split_done, split_points
+from .survey_read import STATS, CellStats, chunk_cell_size, read_tile, split_done, split_points
 
 log = logging.getLogger(__name__)
 
@@ -794,6 +794,9 @@ class SurveyPlan:
     buffer_declared_m: float | None
     splits: list  # plain files to split before the tiles run (``split_points`` tasks)
     summaries: list  # tiles whose ``Algorithm.survey_summary`` gives the survey's values (``run_summary`` tasks)
+    #: the split pass's per-cell statistics that give the survey's values instead (``Algorithm.survey_cells``):
+    #: one file per input, or None
+    cell_stats: list | None = None
 
 
 def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any] | None, *, tile_size_m: float,
@@ -880,14 +883,21 @@ def plan_survey(alg, inputs: Sequence[str], output_dir, params: Mapping[str, Any
     for t in todo:
         box = t.box(buffer_used_m / hu)
         tasks.append({**base_task, "name": t.name, "tile": asdict(t), "files": [asdict(f) for f in catalog.files_in(box)]})
-    summaries = plan_summaries(alg, catalog, tiles, tasks, state, base_task, buffer_used_m / hu, spec)
-    splits = plan_splits(catalog, tasks + summaries, tile_dir / CHUNK_DIR,
-                         chunk_cell_size(tile_size_m / hu, buffer_used_m / hu))
+    # the survey's values from the split pass where every input is split (one decode), else from
+    # each tile's own read
+    from_cells = (alg.survey_cells is not None and alg.survey_cell_summary is not None and bool(tasks)
+                  and "survey_values" not in state and not any(f.copc for f in catalog.files))
+    stats_cell = alg.survey_cells(values, hu) if from_cells else None
+    summaries = [] if from_cells else plan_summaries(alg, catalog, tiles, tasks, state, base_task,
+                                                     buffer_used_m / hu, spec)
+    splits, cell_stats = plan_splits(catalog, tasks + summaries, tile_dir / CHUNK_DIR,
+                                     chunk_cell_size(tile_size_m / hu, buffer_used_m / hu), stats_cell,
+                                     base_task["crs"])
     if skipped:
         log.info("%d of %d tiles were done by an earlier run; skipping them", len(skipped), len(tiles))
 
     return SurveyPlan(alg, values, crs, out, wanted, paths, catalog, tiles, skipped, tasks, state, manifest_path,
-                      tile_size_m, buffer_used_m, declared, splits, summaries)
+                      tile_size_m, buffer_used_m, declared, splits, summaries, cell_stats)
 
 
 def plan_summaries(alg, catalog: Catalog, tiles, tasks: list[dict], state: dict, base_task: dict, buffer: float,
@@ -908,24 +918,28 @@ def plan_summaries(alg, catalog: Catalog, tiles, tasks: list[dict], state: dict,
             for t in tiles]
 
 
-def plan_splits(catalog: Catalog, tasks: list[dict], folder: Path, cell: float) -> list[dict]:
+def plan_splits(catalog: Catalog, tasks: list[dict], folder: Path, cell: float, stats_cell: float | None = None,
+                crs_wkt: str | None = None) -> tuple[list[dict], list[Path] | None]:
     """The plain (not COPC) files that more than one tile reads are split once (survey_read),
-    rather than scanned by every tile: each tile task names the folders it reads them from; the
-    returned ``split_points`` tasks are those not split by an earlier run."""
+    rather than scanned by every tile: each tile task names the folders it reads them from.
+    With ``stats_cell`` every file is split, and gives its ``CellStats`` on that cell on the way.
+    Returns the ``split_points`` tasks not done by an earlier run, and the statistics' files."""
     users: dict[str, int] = {}
     for task in tasks:
         for f in task["files"]:
             if not f["copc"]:
                 users[f["path"]] = users.get(f["path"], 0) + 1
-    folders = {f.path: folder / f"{i:05d}" for i, f in enumerate(catalog.files) if users.get(f.path, 0) > 1}
+    least = 0 if stats_cell else 1
+    folders = {f.path: folder / f"{i:05d}" for i, f in enumerate(catalog.files)
+               if not f.copc and users.get(f.path, 0) > least}
     for task in tasks:
         task["splits"] = {f["path"]: str(folders[f["path"]]) for f in task["files"] if f["path"] in folders}
     splits = []
     for f in catalog.files:
-        if f.path in folders and not split_done(folders[f.path], asdict(f), cell):
+        if f.path in folders and not split_done(folders[f.path], asdict(f), cell, stats_cell):
             splits.append({"name": f"split {Path(f.path).name}", "file": asdict(f), "folder": str(folders[f.path]),
-                           "cell": cell})
-    return splits
+                           "cell": cell, "stats_cell": stats_cell, "crs": crs_wkt})
+    return splits, ([folders[f.path] / STATS for f in catalog.files] if stats_cell else None)
 
 
 def _survey_outputs(alg, output_dir, outputs: Mapping[str, str] | None):
@@ -1016,6 +1030,9 @@ def _survey_values(plan: SurveyPlan, workers: int, scheduler, pools) -> None:
     every tile, summed, through ``survey_values``), given to every tile and kept in the manifest.
     If a tile's summary fails (its data), the tiles keep their own values: that tile fails too,
     and nothing is merged."""
+    if plan.cell_stats is not None:
+        _survey_values_from_cells(plan)
+        return
     if not plan.summaries:
         return
     results: list[dict] = []
@@ -1032,9 +1049,28 @@ def _survey_values(plan: SurveyPlan, workers: int, scheduler, pools) -> None:
     for r in sorted(results, key=lambda r: r["tile"]):  # integers: the order does not matter, but keep one
         for k, v in r["sums"].items():
             sums[k] = sums.get(k, 0) + v
+    _give_survey_values(plan, sums, "the tiles' summaries")
+
+
+def _survey_values_from_cells(plan: SurveyPlan) -> None:
+    """The survey's values from the split pass's per-cell statistics (``Algorithm.survey_cells``);
+    if a file could not be split, the tiles keep their own values (those reading it fail)."""
+    if not plan.cell_stats:  # the algorithm has no value to find for these parameters
+        return
+    missing = [p for p in plan.cell_stats if not Path(p).exists()]
+    if missing:
+        log.warning("the survey's %s values could not be computed (%d files not split); each tile takes its own",
+                    plan.alg.id, len(missing))
+        return
+    stats = CellStats.merged([CellStats.load(p) for p in plan.cell_stats])
+    _give_survey_values(plan, dict(plan.alg.survey_cell_summary(stats, plan.values)), "the split pass")
+
+
+def _give_survey_values(plan: SurveyPlan, sums: dict, source: str) -> None:
     values = dict(plan.alg.survey_values(sums, plan.values, plan.catalog.horizontal_unit_m)) if sums else {}
     plan.state["survey_values"] = values
     plan.state["survey_sums"] = sums
+    plan.state["survey_values_from"] = source
     _write_json_atomic(plan.manifest_path, plan.state)
     for task in plan.tasks:
         task["params"] = {**task["params"], **values}
@@ -1116,7 +1152,7 @@ def survey_report(plan: SurveyPlan, execution: dict, failed: list, written: dict
                    "crs": _crs_name(catalog.crs), "crs_given": crs if crs is None or isinstance(crs, str) else
                    _crs_name(crs), "tile_size_m": plan.tile_size_m, "buffer_m": plan.buffer_m,
                    "buffer_declared_m": plan.buffer_declared_m},
-        "survey_values": state.get("survey_values"),
+        "survey_values": state.get("survey_values"), "survey_values_from": state.get("survey_values_from"),
         "n_tiles": len(tiles), "n_done": sum(r.get("status") in ("done", "empty") for r in recs),
         "n_skipped": len(plan.skipped), "n_empty": sum(r.get("status") == "empty" for r in recs), "n_failed": len(failed),
         "failed": failed, "outputs": written, "manifest": str(plan.manifest_path),

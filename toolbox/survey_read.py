@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -47,17 +48,107 @@ def _key_name(key: int) -> str:
     return f"{ix}_{iy}"
 
 
-def split_done(folder: Path, source: Mapping[str, Any], cell: float) -> bool:
-    """Whether ``folder`` holds a finished split of ``source`` (a SurveyFile as a dict) on ``cell``."""
+def split_done(folder: Path, source: Mapping[str, Any], cell: float, stats_cell: float | None = None) -> bool:
+    """Whether ``folder`` holds a finished split of ``source`` (a SurveyFile as a dict) on ``cell``
+    (and its cell statistics on ``stats_cell`` when asked for)."""
     try:
         idx = json.loads((Path(folder) / INDEX).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
     return (idx.get("source") == [source["path"], source["size"], source["mtime_ns"]] and idx.get("cell") == cell
-            and idx.get("done") is True)
+            and idx.get("done") is True
+            and (stats_cell is None or (idx.get("stats_cell") == stats_cell and (Path(folder) / STATS).exists())))
 
 
-RECORDS, POSITIONS = "records.bin", "positions.bin"
+RECORDS, POSITIONS, STATS = "records.bin", "positions.bin", "cells.npz"
+
+
+@dataclass
+class CellStats:
+    """Per-cell point statistics of a survey on a north-up raster (``Algorithm.survey_cells``):
+    cell borders on multiples of ``cell`` (CRS units), rows from ``north`` down, columns from
+    ``west``; a point on a border belongs to the cell east and south of it, as rasterio's
+    ``rowcol`` places it. ``count`` points, ``zmin`` / ``zmax`` their lowest and highest z (NaN
+    where empty). The units are those a tile's points take (``PointCloud``)."""
+
+    west: float
+    north: float
+    cell: float
+    count: np.ndarray
+    zmin: np.ndarray
+    zmax: np.ndarray
+    horizontal_unit_m: float = 1.0
+    vertical_unit_m: float = 1.0
+
+    @classmethod
+    def empty(cls, west: float, north: float, cell: float, rows: int, cols: int, **units) -> "CellStats":
+        return cls(west, north, cell, np.zeros((rows, cols), np.int64), np.full((rows, cols), np.inf),
+                   np.full((rows, cols), -np.inf), **units)
+
+    def add(self, x, y, z) -> None:
+        """Count points in, growing the raster when they fall outside it (a header's bounds may lie)."""
+        if len(x) == 0:
+            return
+        c0 = int(np.floor((x.min() - self.west) / self.cell))
+        r0 = int(np.floor((self.north - y.max()) / self.cell))
+        c1 = int(np.floor((x.max() - self.west) / self.cell))
+        r1 = int(np.floor((self.north - y.min()) / self.cell))
+        rows, cols = self.count.shape
+        grow = (max(0, -r0), max(0, r1 - rows + 1), max(0, -c0), max(0, c1 - cols + 1))
+        if any(grow):
+            pad = ((grow[0], grow[1]), (grow[2], grow[3]))
+            self.count = np.pad(self.count, pad)
+            self.zmin = np.pad(self.zmin, pad, constant_values=np.inf)
+            self.zmax = np.pad(self.zmax, pad, constant_values=-np.inf)
+            self.west -= grow[2] * self.cell
+            self.north += grow[0] * self.cell
+        rows, cols = self.count.shape
+        col = np.floor((x - self.west) / self.cell).astype(np.int64)
+        row = np.floor((self.north - y) / self.cell).astype(np.int64)
+        flat = row * cols + col
+        self.count += np.bincount(flat, minlength=rows * cols).reshape(rows, cols)
+        np.minimum.at(self.zmin.reshape(-1), flat, z)
+        np.maximum.at(self.zmax.reshape(-1), flat, z)
+
+    def finished(self) -> "CellStats":
+        """NaN for the empty cells' heights."""
+        empty = self.count == 0
+        self.zmin[empty] = np.nan
+        self.zmax[empty] = np.nan
+        return self
+
+    def save(self, path: Path) -> None:
+        tmp = Path(str(path) + ".partial.npz")
+        np.savez(tmp, west=self.west, north=self.north, cell=self.cell, count=self.count, zmin=self.zmin,
+                 zmax=self.zmax, units=[self.horizontal_unit_m, self.vertical_unit_m])
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path) -> "CellStats":
+        with np.load(path) as f:
+            hu, vu = (float(v) for v in f["units"])
+            return cls(float(f["west"]), float(f["north"]), float(f["cell"]), f["count"], f["zmin"], f["zmax"],
+                       hu, vu)
+
+    @classmethod
+    def merged(cls, parts: Sequence["CellStats"]) -> "CellStats":
+        """One raster over all parts (the same cell; origins on its multiples): counts summed,
+        heights the lowest and the highest; the units are the first part's."""
+        cell = parts[0].cell
+        west = min(p.west for p in parts)
+        north = max(p.north for p in parts)
+        cols = max(int(round((p.west - west) / cell)) + p.count.shape[1] for p in parts)
+        rows = max(int(round((north - p.north) / cell)) + p.count.shape[0] for p in parts)
+        out = cls.empty(west, north, cell, rows, cols, horizontal_unit_m=parts[0].horizontal_unit_m,
+                        vertical_unit_m=parts[0].vertical_unit_m)
+        for p in parts:
+            r, c = int(round((north - p.north) / cell)), int(round((p.west - west) / cell))
+            h, w = p.count.shape
+            window = np.s_[r:r + h, c:c + w]
+            out.count[window] += p.count
+            out.zmin[window] = np.fmin(out.zmin[window], np.where(p.count > 0, p.zmin, np.inf))
+            out.zmax[window] = np.fmax(out.zmax[window], np.where(p.count > 0, p.zmax, -np.inf))
+        return out.finished()
 
 
 def split_points(task: Mapping[str, Any]) -> dict:
@@ -74,14 +165,20 @@ def split_points(task: Mapping[str, Any]) -> dict:
 
     t0 = time.perf_counter()
     f, folder, cell = task["file"], Path(task["folder"]), float(task["cell"])
+    stats_cell = task.get("stats_cell")
     base = {"tile": task["name"], "pid": os.getpid(), "file": f["path"]}
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     runs: dict[str, list] = {}
     seen = 0
+    stats = None
     try:
         with laspy.open(f["path"]) as reader, open(folder / RECORDS, "wb") as rec, open(folder / POSITIONS, "wb") as pos:
+            if stats_cell:
+                stats = _file_stats(f, reader.header, float(stats_cell), task.get("crs"))
             for chunk in reader.chunk_iterator(READ_CHUNK_POINTS):
+                if stats is not None:  # the algorithm's whole-survey summary, from this one decode
+                    stats.add(np.asarray(chunk.x), np.asarray(chunk.y), np.asarray(chunk.z))
                 keys = _cell_keys(np.asarray(chunk.x), np.asarray(chunk.y), cell)
                 order = np.argsort(keys, kind="stable")
                 cells, starts = np.unique(keys[order], return_index=True)
@@ -100,13 +197,29 @@ def split_points(task: Mapping[str, Any]) -> dict:
             f"input {f['path']!r} is truncated or corrupt after {seen} points ({' '.join(str(exc).split())[:120]}); "
             "repair or re-download it")
         return {**base, "status": "failed", "error": error, "seconds": round(time.perf_counter() - t0, 3)}
+    if stats is not None:
+        stats.finished().save(folder / STATS)
     index = {"source": [f["path"], f["size"], f["mtime_ns"]], "cell": cell, "n_points": seen, "cells": runs,
-             "done": True}
+             "stats_cell": stats_cell, "done": True}
     tmp = folder / (INDEX + ".partial")
     tmp.write_text(json.dumps(index), encoding="utf-8")
     os.replace(tmp, folder / INDEX)
     return {**base, "status": "done", "n_decoded_points": seen, "n_cells": len(runs),
             "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _file_stats(f: Mapping[str, Any], header, cell: float, crs_wkt) -> CellStats:
+    """An empty CellStats over a file's header bounds, in the units its tiles' points take."""
+    from .io.points import PointCloud, _apply_crs, parse_crs
+
+    empty = np.empty(0)
+    pc = _apply_crs(PointCloud(x=empty, y=empty, z=empty), parse_crs(crs_wkt) if crs_wkt else None, header)
+    west = np.floor(f["minx"] / cell) * cell
+    north = (np.floor(f["maxy"] / cell) + 1) * cell
+    cols = int(np.floor((f["maxx"] - west) / cell)) + 1
+    rows = int(np.floor((north - f["miny"]) / cell)) + 1
+    return CellStats.empty(float(west), float(north), cell, max(rows, 1), max(cols, 1),
+                           horizontal_unit_m=pc.horizontal_unit_m, vertical_unit_m=pc.vertical_unit_m)
 
 
 def _split_record(reader, folder: Path, box) -> tuple[Any, int]:

@@ -313,6 +313,20 @@ def spacing_counts(x, y, z, s: "GroundSettings", core_box) -> tuple[int, int]:
     return n_points, n_cells
 
 
+def spacing_counts_from_cells(count, zmin, zmax, s: "GroundSettings") -> tuple[int, int]:
+    """``spacing_counts`` over a whole survey from its per-cell point count and lowest and highest z
+    on the filter grid (north-up, borders on multiples of the cell, as ``Grid`` places points):
+    a cell whose points are all low outliers holds no point for the footprint, as in
+    ``lowest_points``."""
+    count, zmin, zmax = (np.pad(a, 1, constant_values=v) for a, v in ((count, 0), (zmin, np.nan), (zmax, np.nan)))
+    filled = np.where(count > 0, zmin, np.inf)
+    second = ndimage.rank_filter(filled, 1, size=3, mode="nearest")  # as low_outliers
+    bad_cell = np.isfinite(second) & (filled < second - s.low_outlier)
+    all_out = bad_cell & (zmax < second - s.low_outlier)
+    domain = data_footprint((count > 0) & ~all_out, s)
+    return int(count.sum()), int(domain.sum())
+
+
 REFINE_PER_SPACING = 1.25  # the last refinement's cell over the point spacing (a 3x3 block: ~14 points)
 
 

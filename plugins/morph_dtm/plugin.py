@@ -55,6 +55,23 @@ def survey_summary(pc, core_box, p) -> dict:
     return {"n_points": n_points, "n_footprint_cells": n_cells}
 
 
+def survey_cells(p, horizontal_unit_m: float) -> float | None:
+    """Survey runs: the grid whose per-cell statistics give the same counts as ``survey_summary``
+    (the filter grid), or None when no value is taken from the whole input."""
+    if p["ground"] == "file" or p["refine_cell_m"] is not None:
+        return None
+    return p["filter_cell_m"] / horizontal_unit_m
+
+
+def survey_cell_summary(cells, p) -> dict:
+    """``survey_summary`` summed over every tile, from the split pass's ``CellStats``."""
+    from .core import spacing_counts_from_cells
+
+    settings = _settings_in_units(p, cells.horizontal_unit_m, cells.vertical_unit_m)
+    n_points, n_cells = spacing_counts_from_cells(cells.count, cells.zmin, cells.zmax, settings)
+    return {"n_points": n_points, "n_footprint_cells": n_cells} if n_points else {}
+
+
 def survey_values(sums, p, horizontal_unit_m: float) -> dict:
     """The survey's refine_cell_m, from the tiles' ``survey_summary`` summed: what one run over
     the whole survey would choose."""
@@ -69,9 +86,12 @@ def survey_values(sums, p, horizontal_unit_m: float) -> dict:
 
 
 def _ground_settings(pc, p):
+    return _settings_in_units(p, pc.horizontal_unit_m, pc.vertical_unit_m)
+
+
+def _settings_in_units(p, hu: float, vu: float):
     from .core import GroundSettings
 
-    hu, vu = pc.horizontal_unit_m, pc.vertical_unit_m
     cell = p["filter_cell_m"] / hu
     return GroundSettings(
         cell=cell, max_size=p["max_filter_size_m"] / hu,
@@ -373,6 +393,7 @@ def toolbox_algorithms():
                 "Several input files, or a folder, run as a batch in parallel."),
             reference=REFERENCE,
             tile_buffer_m=ground_buffer_m, survey_summary=survey_summary, survey_values=survey_values,
+            survey_cells=survey_cells, survey_cell_summary=survey_cell_summary,
             parameters=[resolution,
                         Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or "
                                   "the file's own class 2 (then only the DTM is made)", choices=("filter", "file")),
@@ -423,6 +444,7 @@ def toolbox_algorithms():
             # the ground's need, and a building's whole roof (its planar set) seen from either side
             tile_buffer_m=lambda p: max(ground_buffer_m(p), 50.0),
             survey_summary=survey_summary, survey_values=survey_values,
+            survey_cells=survey_cells, survey_cell_summary=survey_cell_summary,
             parameters=[
                 resolution,
                 Parameter("ground", str, "filter", "where ground comes from: the morphological filter, or the "
