@@ -109,6 +109,37 @@ def test_each_feature_is_kept_by_exactly_one_tile_and_cut_lines_join_again():
     assert len(out["crossings"]) == 1 and out["crossings"].conductors[0] == "0,1"
 
 
+def test_polygons_wider_than_a_tile_dissolve_and_those_seen_whole_stay_exact():
+    """``LayerMerge(dissolve=True)``: a long roof that each tile drew from its own part (their
+    borders 0.4 m apart at the core border) is one feature; a building both tiles saw whole is the
+    same polygon again; a building wholly inside one core is kept as it is; ids are unique and the
+    area is the union's."""
+    from shapely.geometry import box
+
+    crs = "EPSG:25832"
+    t0, t1 = Tile(0, 0, 0.0, 0.0, 100.0, 100.0), Tile(1, 0, 100.0, 0.0, 200.0, 100.0)
+    # each tile's own drawing of it, to the edges of what it read: b's stops 0.4 m short of the core border
+    long_a, long_b = box(-60, 10, 160, 30), box(100.4, 10.4, 260, 30.4)
+    small = box(90, 60, 110, 75)  # across the border, seen whole by both
+    inside = box(150, 80, 160, 90)
+    layers = {"a": [long_a, small, inside], "b": [long_b, small, inside]}
+    per_tile = []
+    for name, t in (("a", t0), ("b", t1)):
+        gdf = gpd.GeoDataFrame({"building_id": [1, 2, 3], "area_m2": [g.area for g in layers[name]]},
+                               geometry=layers[name], crs=crs)
+        per_tile.append((name, {"o": cut_layer(gdf, t, dissolve=True)}))
+    rules = {"o": LayerMerge(id_field="building_id", dissolve=True, join_tolerance_m=1.0, combine={"area_m2": "area_m2"})}
+    out = merge_layers(per_tile, rules, {"o": "Polygon"})["o"]
+    assert len(out) == 3 and sorted(out.building_id) == [0, 1, 2] and set(out.geom_type) == {"Polygon"}
+    joined = out.geometry[out.area.idxmax()]
+    assert joined.bounds == pytest.approx((0, 10, 200, 30.4))  # each tile's part clipped to its core
+    assert joined.contains(box(0, 10, 100, 30).buffer(-1e-6)) and joined.contains(box(100.4, 10.4, 200, 30.4).buffer(-1e-6))
+    assert 2000 + 99.6 * 20 < joined.area < 2000 + 99.6 * 20 + 0.4 * 20.4  # the gap closed, nothing else added
+    assert sum(g.symmetric_difference(small).area < 1e-9 for g in out.geometry) == 1
+    assert sum(g.equals(inside) for g in out.geometry) == 1
+    assert sorted(out.area_m2) == sorted(round(g.area, 2) for g in out.geometry)
+
+
 def test_wires_stacked_over_one_another_join_with_their_own_piece():
     crs = "EPSG:25832"
     t0, t1 = Tile(0, 0, 0.0, 0.0, 100.0, 100.0), Tile(1, 0, 100.0, 0.0, 200.0, 100.0)

@@ -280,3 +280,28 @@ def test_building_edges_survey_gives_the_whole_runs_outlines_and_tiles_without_b
     states = json.loads((tmp_path / "out" / "survey.json").read_text())["tiles"].values()
     empty = [t for t in states if t["status"] == "empty" and "no building points" in t.get("reason", "")]
     assert empty, "no tile without buildings: the test no longer shows that such a tile is empty, not failed"
+
+
+def test_a_building_wider_than_the_buffer_is_one_outline_made_of_its_tiles_parts(real_splits, tmp_path):
+    """AHN4 07CZ2_14 in 100 m tiles: one roof 155 m x 340 m is wider than the 60 m buffer, so each
+    tile sees a part of it. The parts, clipped to their cores, become one outline (before: four
+    overlapping outlines, 33 features for 30); every other outline is the whole run's; building
+    ids are unique and the roof edges refer to them."""
+    import geopandas as gpd
+
+    d = real_splits("ahn4_corridor/07CZ2_14.laz")
+    toolbox.run("building-edges", shared_file("ahn4_corridor/07CZ2_14.laz"), tmp_path / "whole.gpkg")
+    rep = run_survey("building-edges", [d / "split"], tmp_path / "out", tile_size_m=100, workers=2)
+    assert rep["n_failed"] == 0
+    a = gpd.read_file(tmp_path / "whole.gpkg", layer="building_outlines")
+    b = gpd.read_file(tmp_path / "out" / "outlines.gpkg", layer="building_outlines")
+    assert len(a) == len(b) and set(b.geom_type) == {"Polygon"} and b.building_id.is_unique
+    wide = a.geometry.map(lambda g: max(g.bounds[2] - g.bounds[0], g.bounds[3] - g.bounds[1]) > 220)  # > tile + 2 buffers
+    assert wide.sum() == 1
+    for g, is_wide in zip(a.geometry, wide):
+        same = b.geometry[b.geometry.intersects(g)]
+        assert len(same) == 1
+        iou = same.iloc[0].intersection(g).area / same.iloc[0].union(g).area
+        assert iou > (0.9 if is_wide else 1 - 1e-6), iou  # the wide one: each part regularised on its own
+    edges = gpd.read_file(tmp_path / "out" / "outlines.gpkg", layer="roof_edges")
+    assert edges.building_id.isin(b.building_id).mean() > 0.95

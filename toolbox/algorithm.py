@@ -184,8 +184,14 @@ class LayerMerge:
     other, in the layer's units) become one feature. ``id_field`` is renumbered 0..n-1 over the
     survey; ``refs`` maps a field of this layer to the layer whose ``id_field`` it holds (an
     integer, or integers joined by commas), so references follow the renumbering. ``combine``
-    says how a joined feature's field comes from its pieces: ``min``, ``max``, ``sum`` or
-    ``length`` (the joined line's length); any other field is the longest piece's.
+    says how a joined feature's field comes from its pieces: ``min``, ``max``, ``sum``, ``length``
+    (the joined line's length) or ``area_m2`` (the dissolved polygon's area in m²); any other field
+    is the longest (largest) piece's.
+
+    ``dissolve`` (polygons, for objects that may be wider than the tile's buffer, so that a tile
+    sees only part of one): a polygon that crosses the tile's core border is clipped to the core,
+    and pieces of neighbouring tiles that meet at a border (within ``join_tolerance_m``) become
+    one feature, their union.
     """
 
     join: bool = True
@@ -193,11 +199,12 @@ class LayerMerge:
     id_field: str | None = None
     refs: Mapping[str, str] = field(default_factory=dict)
     combine: Mapping[str, str] = field(default_factory=dict)
+    dissolve: bool = False
 
     def __post_init__(self):
-        bad = {k: v for k, v in self.combine.items() if v not in ("min", "max", "sum", "length")}
+        bad = {k: v for k, v in self.combine.items() if v not in ("min", "max", "sum", "length", "area_m2")}
         if bad:
-            raise ValueError(f"LayerMerge.combine: {bad} (allowed: min, max, sum, length)")
+            raise ValueError(f"LayerMerge.combine: {bad} (allowed: min, max, sum, length, area_m2)")
 
 
 @dataclass(frozen=True)

@@ -329,14 +329,16 @@ def clip_polyline(coords: np.ndarray, box) -> list[tuple[np.ndarray, bool, bool]
     return [(c, s, e) for c, s, e in pieces if len(c) >= 2 and np.hypot(*(c[-1, :2] - c[0, :2])) > 0]
 
 
-def cut_layer(gdf, tile: Tile):
+def cut_layer(gdf, tile: Tile, dissolve: bool = False):
     """The features of a layer this tile owns: points in its core, polygons whose representative
-    point is in it, lines clipped to it (columns ``_piece``: the feature's row, ``_cut0`` /
-    ``_cut1``: whether the piece's start / end was cut at the core's border)."""
+    point is in it (with ``dissolve``: polygons clipped to it), lines clipped to it (columns
+    ``_piece``: the feature's row, ``_cut0`` / ``_cut1``: whether the piece's start / end was cut
+    at the core's border; a clipped polygon's ``_cut0``: whether it was)."""
     import geopandas as gpd
-    from shapely.geometry import LineString
+    from shapely.geometry import LineString, box
 
     x0, y0, x1, y1 = tile.box()
+    core = box(x0, y0, x1, y1)
 
     def inside(x, y):
         return (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
@@ -355,6 +357,16 @@ def cut_layer(gdf, tile: Tile):
                     pieces.append(i)
                     cuts0.append(c0)
                     cuts1.append(c1)
+            continue
+        if dissolve and kind in ("Polygon", "MultiPolygon") and not core.contains(g):
+            part = g.intersection(core)
+            for piece in getattr(part, "geoms", [part]):
+                if piece.geom_type == "Polygon" and piece.area > 0:
+                    rows.append(i)
+                    geoms.append(piece)
+                    pieces.append(i)
+                    cuts0.append(True)
+                    cuts1.append(False)
             continue
         p = g if kind == "Point" else g.representative_point()
         if inside(p.x, p.y):
@@ -464,8 +476,9 @@ def _write_tile_outputs(alg: Algorithm, outputs: Mapping[str, Any], task, tile: 
             write_raster(part, path, overwrite=True)
         elif kind == "vector":
             layers = {}
+            rules = next((o.merge for o in alg.outputs if o.name == name), None) or {}
             for layer, gdf in value.items():
-                layers[layer] = cut_layer(gdf, tile)
+                layers[layer] = cut_layer(gdf, tile, dissolve=bool(rules.get(layer) and rules[layer].dissolve))
                 gtype = gdf.attrs.get("geometry_type") or (gdf.geom_type.iloc[0] if len(gdf) else "Unknown")
                 layer_types[f"{name}:{layer}"] = gtype
                 if len(layers[layer]) == 0:
@@ -562,7 +575,7 @@ def _xml(text: str) -> str:
 
 
 def merge_layers(per_tile: Sequence[tuple[str, dict]], rules: Mapping[str, LayerMerge] | None, layer_types: Mapping[str, str],
-                 crs=None) -> dict:
+                 crs=None, horizontal_unit_m: float = 1.0) -> dict:
     """``[(tile, {layer: cut GeoDataFrame})]`` into ``{layer: GeoDataFrame}``: pieces of lines
     joined where rules say so, ids renumbered over the survey, references followed."""
     import geopandas as gpd
@@ -589,6 +602,8 @@ def merge_layers(per_tile: Sequence[tuple[str, dict]], rules: Mapping[str, Layer
         df = gpd.GeoDataFrame(pd.concat(frames, ignore_index=True), geometry=frames[0].geometry.name, crs=frames[0].crs)
         if rule.join and df.geom_type.isin(["LineString"]).all():
             df = _join_pieces(df, rule)
+        elif rule.dissolve and df.geom_type.isin(["Polygon"]).all():
+            df = _dissolve_pieces(df, rule, horizontal_unit_m)
         else:
             df["_members"] = [[(t, p)] for t, p in zip(df["_tile"], df["_piece"])]
         # a deterministic order, whatever order the tiles finished in
@@ -623,6 +638,65 @@ def _follow_refs(values, members, id_map):
         else:
             out.append(-1 if v is None or (isinstance(v, float) and np.isnan(v)) else id_map.get((tile, int(v)), -1))
     return out
+
+
+def _dissolve_pieces(df, rule: LayerMerge, horizontal_unit_m: float):
+    """Clipped polygons (``_cut0``) of different tiles that meet at a core border become one
+    feature, their union; the others stay as they are."""
+    import geopandas as gpd
+    import shapely
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    geoms = df.geometry.to_numpy()
+    tiles = df["_tile"].to_numpy()
+    cut = np.flatnonzero(df["_cut0"].to_numpy(bool))
+    a, b = shapely.STRtree(geoms[cut]).query(geoms[cut], predicate="dwithin", distance=rule.join_tolerance_m)
+    keep = (a < b) & (tiles[cut[a]] != tiles[cut[b]])
+    n = len(df)
+    graph = coo_matrix((np.ones(int(keep.sum())), (cut[a[keep]], cut[b[keep]])), shape=(n, n))
+    _, group = connected_components(graph, directed=False)
+    areas = shapely.area(geoms)
+    rows = []
+    for g in np.unique(group):
+        members = np.flatnonzero(group == g)
+        union = _union_closed(geoms[members], rule.join_tolerance_m) if len(members) > 1 else geoms[members[0]]
+        for part in getattr(union, "geoms", [union]):  # pieces that still do not meet stay apart
+            own = [m for m in members if len(members) == 1 or geoms[m].intersects(part)] or list(members)
+            rows.append(_dissolved_row(df, rule, own, part, horizontal_unit_m, areas))
+    return gpd.GeoDataFrame(rows, geometry="geometry", crs=df.crs)
+
+
+def _dissolved_row(df, rule: LayerMerge, members, union, horizontal_unit_m: float, areas) -> dict:
+    """One dissolved feature: the largest piece's fields, those ``rule.combine`` names combined."""
+    tiles = df["_tile"].to_numpy()
+    base = members[int(np.argmax(areas[members]))]
+    row = df.iloc[base].drop(labels=[df.geometry.name]).to_dict()
+    for fld, how in (rule.combine.items() if df["_cut0"].iat[base] else ()):  # a whole feature keeps its own
+        if how == "area_m2":
+            row[fld] = round(float(union.area) * horizontal_unit_m ** 2, 2)
+        elif fld in df.columns and how in ("min", "max", "sum"):
+            vals = df[fld].iloc[members].to_numpy(dtype=float)
+            row[fld] = float({"min": np.nanmin, "max": np.nanmax, "sum": np.nansum}[how](vals)) \
+                if np.isfinite(vals).any() else np.nan
+    row["_members"] = [(tiles[i], int(df["_piece"].iat[i])) for i in members]
+    if rule.id_field and rule.id_field in df.columns:
+        row["_old_ids"] = [int(df[rule.id_field].iat[i]) for i in members]
+    row["geometry"] = union
+    return row
+
+
+def _union_closed(pieces, gap: float):
+    """The union of polygon pieces; where they do not touch, closed over the gaps of up to ``gap``
+    that made them neighbours (each tile drew its piece from part of the object, so their borders
+    may miss by that much), square corners kept."""
+    import shapely
+
+    union = shapely.union_all(pieces)
+    if union.geom_type == "Polygon":
+        return union
+    return shapely.buffer(shapely.union_all(shapely.buffer(pieces, gap, join_style="mitre")), -gap,
+                          join_style="mitre")
 
 
 def _join_pieces(df, rule: LayerMerge):
@@ -1187,7 +1261,8 @@ def _merge_outputs(alg: Algorithm, wanted, paths, tiles, state, catalog, style_d
                     out_name, layer = key.split(":", 1)
                     if out_name == o.name:
                         types.setdefault(layer, gtype)
-            layers = merge_layers(per_tile, o.merge, types, crs=catalog.crs)
+            layers = merge_layers(per_tile, o.merge, types, crs=catalog.crs,
+                                  horizontal_unit_m=catalog.horizontal_unit_m)
             if not layers:
                 import geopandas as gpd
 

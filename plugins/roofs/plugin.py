@@ -4,7 +4,7 @@ lives in ``core`` (pure functions), the voting in ``kernels`` (taichi) and ``ref
 from __future__ import annotations
 
 import toolbox
-from toolbox import Algorithm, DataError, NothingFound, Input, Output, Parameter, UsageError
+from toolbox import Algorithm, DataError, NothingFound, Input, LayerMerge, Output, Parameter, UsageError
 
 REFERENCE = ("Borowiec, Hough transform as a tool supporting building roof detection (METHODS.md §3); "
              "Borrmann, Elseberg, Lingemann, Nüchter (2011), The 3D Hough Transform for plane detection in "
@@ -382,7 +382,12 @@ def toolbox_algorithms():
             Parameter("min_area_m2", float, 10.0, "smallest building", unit="m2", minimum=0.0, maximum=1e7),
         ],
         inputs=[Input("points", "points", "LAS/LAZ point cloud")],
-        outputs=[Output("outlines", "vector", "layers building_outlines and roof_edges", style="building_outlines")],
+        outputs=[Output("outlines", "vector", "layers building_outlines and roof_edges", style="building_outlines",
+                        # a building wider than the buffer is seen in parts: each tile's part, clipped to
+                        # its core, joins its neighbours'
+                        merge={"building_outlines": LayerMerge(id_field="building_id", dissolve=True, join_tolerance_m=1.0,
+                                                               combine={"area_m2": "area_m2", "height_m": "max"}),
+                               "roof_edges": LayerMerge(refs={"building_id": "building_outlines"})})],
     ), Algorithm(
         id="roof-planes", title="Roof planes (3D Hough, ball accumulator)", run=_run,
         description=(
