@@ -669,12 +669,21 @@ def _dissolve_pieces(df, rule: LayerMerge, horizontal_unit_m: float):
 
 def _dissolved_row(df, rule: LayerMerge, members, union, horizontal_unit_m: float, areas) -> dict:
     """One dissolved feature: the largest piece's fields, those ``rule.combine`` names combined."""
-    tiles = df["_tile"].to_numpy()
     base = members[int(np.argmax(areas[members]))]
+    return _merged_row(df, rule, members, base, union, {"area_m2": round(float(union.area) * horizontal_unit_m ** 2, 2)},
+                       combine=bool(df["_cut0"].iat[base]))  # a whole feature keeps its own fields
+
+
+def _merged_row(df, rule: LayerMerge, members, base: int, geometry, measured: Mapping[str, float],
+                combine: bool = True) -> dict:
+    """The row of a feature merged from pieces ``members``: the ``base`` piece's fields, those
+    ``rule.combine`` names from the pieces (``min`` / ``max`` / ``sum``) or ``measured`` on the
+    merged geometry (``length``, ``area_m2``), and the bookkeeping the ids' renumbering follows."""
+    tiles = df["_tile"].to_numpy()
     row = df.iloc[base].drop(labels=[df.geometry.name]).to_dict()
-    for fld, how in (rule.combine.items() if df["_cut0"].iat[base] else ()):  # a whole feature keeps its own
-        if how == "area_m2":
-            row[fld] = round(float(union.area) * horizontal_unit_m ** 2, 2)
+    for fld, how in (rule.combine.items() if combine else ()):
+        if how in measured:
+            row[fld] = measured[how]
         elif fld in df.columns and how in ("min", "max", "sum"):
             vals = df[fld].iloc[members].to_numpy(dtype=float)
             row[fld] = float({"min": np.nanmin, "max": np.nanmax, "sum": np.nansum}[how](vals)) \
@@ -682,7 +691,7 @@ def _dissolved_row(df, rule: LayerMerge, members, union, horizontal_unit_m: floa
     row["_members"] = [(tiles[i], int(df["_piece"].iat[i])) for i in members]
     if rule.id_field and rule.id_field in df.columns:
         row["_old_ids"] = [int(df[rule.id_field].iat[i]) for i in members]
-    row["geometry"] = union
+    row["geometry"] = geometry
     return row
 
 
@@ -770,19 +779,8 @@ def _join_pieces(df, rule: LayerMerge):
             line = np.vstack([line[:-1], mid[None, :], p[1:]])
         members = [i for i, _ in chain]
         base = members[int(np.argmax(lengths[members]))]
-        row = df.iloc[base].drop(labels=[df.geometry.name]).to_dict()
-        for fld, how in rule.combine.items():
-            if how == "length":
-                row[fld] = float(np.hypot(*np.diff(line[:, :2], axis=0).T).sum())
-            elif fld in df.columns:
-                vals = df[fld].iloc[members].to_numpy(dtype=float)
-                row[fld] = float({"min": np.nanmin, "max": np.nanmax, "sum": np.nansum}[how](vals)) \
-                    if np.isfinite(vals).any() else np.nan
-        row["_members"] = [(tiles[i], int(df["_piece"].iat[i])) for i in members]
-        if rule.id_field and rule.id_field in df.columns:
-            row["_old_ids"] = [int(df[rule.id_field].iat[i]) for i in members]
-        row["geometry"] = LineString(line)
-        rows.append(row)
+        rows.append(_merged_row(df, rule, members, base, LineString(line),
+                                {"length": float(np.hypot(*np.diff(line[:, :2], axis=0).T).sum())}))
     return gpd.GeoDataFrame(rows, geometry="geometry", crs=df.crs)
 
 
